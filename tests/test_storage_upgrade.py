@@ -131,6 +131,16 @@ def test_import_names_its_device_or_is_refused(tmp_path):
     assert r.exit_code == 2 and "--device" in r.stderr and not (tmp_path / "s.db").exists(), r.output
 
 
+@pytest.mark.parametrize("device", [[], ["-d", "sim://"]])
+def test_import_of_a_file_not_there_says_so_before_a_store_is_made(tmp_path, device):
+    """Without -d it said '... is a measurement table, which does not say its device' (is_history_file is False
+    for a file not there); with -d it made an empty store first."""
+    r = CliRunner().invoke(app, ["import", str(tmp_path / "h.json"), *device, "--db", str(tmp_path / "s.db")])
+    said = " ".join(r.stderr.split())
+    assert r.exit_code == 2 and f"cannot read table {tmp_path / 'h.json'}: no such table file" in said, said
+    assert "measurement table" not in said and not (tmp_path / "s.db").exists()
+
+
 def test_a_schema_3_store_is_copied_then_its_devices_get_their_names(tmp_path):
     db = tmp_path / "lab.db"
     _schema_3_store(db, {
@@ -332,3 +342,25 @@ def test_an_upgrade_says_its_copy_keeps_the_passwords_a_store_made_before_redact
     _schema_3_store(clean, {"anc300://h": ROWS[:1]})
     r = CliRunner().invoke(app, ["history", "--db", str(clean), "--json"])
     assert r.exit_code == 0 and "password" not in r.stderr and (tmp_path / "clean.v3.db").exists()
+
+
+def test_an_old_name_that_names_no_device_loses_its_password_in_the_upgrade(tmp_path):
+    """A store made before redaction kept 'anc300://u:hunter2@h:xx' (a port that is no number) as written;
+    stored_device refuses it, so the upgrade kept the name, password and all, in the upgraded store, while its
+    note said the upgraded store holds none (and export --json wrote the password into the history file).
+    Now the name is kept redacted; its rows, state and the note are as for any other name."""
+    db = tmp_path / "lab.db"
+    _schema_3_store(db, {"anc300://u:x@h:xx": ROWS[:2], "anc300://h?x=a": ROWS[2:3]})
+    con = sqlite3.connect(db)
+    con.execute("UPDATE devices SET url = 'anc300://u:hunter2@h:xx' WHERE url = 'anc300://u:***@h:xx'")
+    con.execute("UPDATE devices SET url = replace(url, '?x=', '?password=')")
+    con.commit()
+    con.close()
+    r = CliRunner().invoke(app, ["export", "--json", "--db", str(db), "-o", str(tmp_path / "h.json")])
+    assert r.exit_code == 0, r.output
+    assert "2 device name(s) of the old store held a password" in " ".join(r.stderr.split())
+    assert b"hunter2" not in db.read_bytes() and b"hunter2" in (tmp_path / "lab.v3.db").read_bytes()
+    assert b"hunter2" not in (tmp_path / "h.json").read_bytes()
+    with Store.open(db) as st:
+        assert sorted(d["url"] for d in st.devices()) == ["anc300://h", "anc300://u:***@h:xx"]
+        assert len(st.traverses(device="anc300://u:***@h:xx")) == 2

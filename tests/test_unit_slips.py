@@ -288,3 +288,85 @@ def test_a_kept_position_or_tilt_set_from_python_in_degrees_names_the_slip() -> 
     with pytest.raises(ValueError, match="outside joint 3's range") as e:
         state.set_position(3, 0.0121)  # a near miss: no guess
     assert "in mm" not in str(e.value) and state.positions[2] == -math.pi / 2 and state.theta == 0.0
+
+
+def test_a_stored_traverse_a_fit_now_refuses_is_named_by_its_id(tmp_path: Path) -> None:
+    """A store written before traverses were checked (units58) may hold q3 = 5 (mm as m) or a tilt of 4 rad.
+    fit, report and export refused it as 'traverse 1', its place in a list from 0: the stored id 2, and
+    `stickslip delete -t 1` removed another row. They now name the stored id and how to go on; excluded, the
+    rest is exported (anova, which fits nothing, still runs)."""
+    import sqlite3
+
+    from synth import paper_table
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+    from stickslip.storage import Store
+
+    db = tmp_path / "lab.db"
+    with Store.open(db) as st:
+        st.add_traverses(paper_table()[:4], device="sim://")
+    con = sqlite3.connect(db)
+    con.execute("UPDATE traverses SET q3 = 5.0 WHERE id = 2")
+    con.execute("UPDATE traverses SET theta = 4.0 WHERE id = 3")
+    con.commit()
+    con.close()
+    runner = CliRunner()
+    for args in (["fit"], ["report"], ["export", "-o", str(tmp_path / "m.csv")]):
+        r = runner.invoke(app, [*args, "--db", str(db)])
+        said = " ".join(r.output.split())
+        assert r.exit_code == 2, (args, said)
+        assert "stored traverse 2 (sim://, 2026-11-22): q3 = 5 is no arm's position of joint 3" in said, said
+        assert "stored traverse 3 (sim://, 2026-11-22): theta = 4 rad is outside [-pi, pi]" in said, said
+        assert "traverse 1:" not in said and "stickslip exclude -t ID" in said
+    assert runner.invoke(app, ["anova", "--db", str(db)]).exit_code == 0
+    assert runner.invoke(app, ["exclude", "-t", "2", "-t", "3", "-r", "mm", "--db", str(db)]).exit_code == 0
+    r = runner.invoke(app, ["export", "-o", str(tmp_path / "m.csv"), "--db", str(db)])
+    assert r.exit_code == 0 and len(parse_measurements((tmp_path / "m.csv").read_text())) == 2, r.output
+
+
+@pytest.mark.parametrize("field", ["q1", "q2", "q3", "theta", "psi"])
+def test_a_pose_of_an_int_too_large_for_a_float_is_refused_not_an_overflow(field: str) -> None:
+    """Pose(q2=10**400) (a notebook's int, a JSON integer) raised OverflowError from float(), not the ValueError a
+    Pose promises; the message does not write the 401 digits out."""
+    with pytest.raises(ValueError, match=f"{field} must be a finite number in SI units, got 1000") as e:
+        Pose(**{field: 10**400})
+    assert not isinstance(e.value, OverflowError) and len(str(e.value)) < 120
+
+
+def test_a_traverse_of_an_int_too_large_for_a_float_is_refused_not_an_overflow() -> None:
+    """check_traverses raised OverflowError (math.isfinite of 10**400) where it lists problems."""
+    t = Traverse("2026-11-22", 3, "+", 0.0, -1.0, 0.001, 0.0, 0.0, 0.0, 10**400, 10)
+    with pytest.raises(TableError, match="end must be a finite number"):
+        check_traverses([t])
+
+
+_MOVING_OWN_Q = (
+    "day,joint,direction,q1,q2,q3,theta,psi,start,end,steps\n"
+    "2026-11-22,3,+,0,-1,5,0,0,0,0.001,10\n"  # joint 3's own q3 in mm: ignored by the fit, refused by the store
+    "2026-11-22,2,+,0,-90,0.001,0,0,-0.5,0.2,10\n"  # joint 2's own q2 in degrees
+)
+
+
+@pytest.mark.parametrize("reader", ["rows", "columns", "import"])
+def test_a_moving_joint_s_own_coordinate_no_arm_takes_is_refused_by_the_reader_naming_its_line(
+    tmp_path: Path, reader: str
+) -> None:
+    """The readers skipped the moving joint's own q (ignored) while the store refuses it as no arm's position:
+    such a table read, then import failed with 'traverse '2026-11-22' joint 3 +: q3 = 5 ...' (no file, no line, the
+    second row unsaid) and fit with 'traverse 0: ...'. Now the reader names each line."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    path = tmp_path / "m.csv"
+    path.write_text(_MOVING_OWN_Q)
+    if reader == "import":
+        r = CliRunner().invoke(app, ["import", str(path), "-d", "sim://", "--db", str(tmp_path / "s.db")])
+        said = " ".join(r.stderr.split())
+    else:
+        with pytest.raises(TableError) as e:
+            (parse_measurements if reader == "rows" else parse_measurement_table)(_MOVING_OWN_Q, str(path))
+        said = " ".join(str(e.value).split())
+    assert f"{path}:2: q3 = 5 is no arm's position of joint 3: beyond a metre" in said, said
+    assert f"{path}:3: q2 = -90 is no arm's position of joint 2: beyond a full turn" in said, said

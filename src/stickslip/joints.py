@@ -225,6 +225,24 @@ def _slip(q: float, rotary: bool, fits: Callable[[float], bool]) -> str | None:
     return f"in {' or '.join(name for name, _, _ in found)}? {said}: {kind}"
 
 
+def _finite(q: object) -> float | None:
+    """``q`` as a finite float, or None: not a number (a bool, a text), not finite, or an int too large for a float
+    (a JSON ``1000...0`` of 400 digits made ``float`` raise OverflowError, a traceback where a message was due)."""
+    if isinstance(q, bool) or not isinstance(q, (int, float)) and not hasattr(q, "__float__"):
+        return None
+    try:
+        v = float(q)  # (an object with __float__)
+    except (OverflowError, ValueError, TypeError):
+        return None
+    return v if math.isfinite(v) else None
+
+
+def _shown(q: object) -> str:
+    """``repr(q)``, at most 40 characters (an int of 400 digits is not written out)."""
+    text = repr(q)
+    return text if len(text) <= 40 else f"{text[:20]}...({len(text)} characters)"
+
+
 def coordinate_problem(name: str, joint: int, q: float) -> str | None:
     """Why ``q`` can be no arm's coordinate of joint ``joint`` (1, 2, 3), whatever the arm; ``None`` if it can.
 
@@ -234,11 +252,9 @@ def coordinate_problem(name: str, joint: int, q: float) -> str | None:
     too), within :data:`MAX_TURN`. Beyond, the message names the likely unit slip
     (``q2 = -90``: degrees).
     """
-    if isinstance(q, bool) or not isinstance(q, (int, float)) and not hasattr(q, "__float__"):
-        return f"{name} must be a finite number in SI units, got {q!r}"
-    v = float(q)
-    if not math.isfinite(v):
-        return f"{name} must be a finite number in SI units, got {q!r}"
+    v = _finite(q)
+    if v is None:
+        return f"{name} must be a finite number in SI units, got {_shown(q)}"
     rotary = joint != 3
     bound = MAX_TURN if rotary else MAX_STROKE
     if abs(v) <= bound:
@@ -250,11 +266,9 @@ def coordinate_problem(name: str, joint: int, q: float) -> str | None:
 
 def tilt_problem(name: str, value: float) -> str | None:
     """Why ``value`` is no base tilt (``theta``, ``psi``): not finite, or outside [-pi, pi] (degrees?)."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) and not hasattr(value, "__float__"):
-        return f"{name} must be a finite number in SI units, got {value!r}"
-    v = float(value)
-    if not math.isfinite(v):
-        return f"{name} must be a finite number in SI units, got {value!r}"
+    v = _finite(value)
+    if v is None:
+        return f"{name} must be a finite number in SI units, got {_shown(value)}"
     if -TILT_LIMIT <= v <= TILT_LIMIT:
         return None
     return f"{name} = {v:.6g} rad is outside [-pi, pi] (angles are in radians)"

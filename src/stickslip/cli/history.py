@@ -36,9 +36,10 @@ if TYPE_CHECKING:
 
 
 def _traverses_from(
-    meas: Path | None, db: str | None, device: str | None, day: str | None
+    meas: Path | None, db: str | None, device: str | None, day: str | None, checked: bool = False
 ) -> tuple[list[Traverse], str]:
-    """Traverses from a CSV file, or else from the database."""
+    """Traverses from a CSV file, or else from the database (``checked``: a stored one a fit refuses is named by
+    its id)."""
     if meas is not None:
         ts = read_table(meas)
         if day is not None:
@@ -46,9 +47,16 @@ def _traverses_from(
             if not ts:
                 fail(f"{meas}: no traverses on day {day!r}")
         return ts, str(meas)
+    from ..measurements import TableError, check_traverses
+
     with open_store(db, must_exist=True) as st:
         ts = st.traverses(device=device, day=day)
         where = f"the database {st.path}"
+        try:
+            if checked:
+                check_traverses(ts, limit=1)  # what a fit checks, naming a traverse by its place, not its id
+        except TableError:
+            fail(_stored_refusal(st, device, day, None))
     if not ts:
         dev_text = f"device {redact_url(device)}" if device else ""
         what = " and ".join(x for x in (dev_text, f"day {day}" if day else "") if x)
@@ -133,7 +141,7 @@ def export(
     import itertools
     from collections.abc import Iterator
 
-    from ..measurements import write_measurements
+    from ..measurements import TableError, write_measurements
     from ..measurements.history_file import write_history
 
     if joint is not None and joint not in (1, 2, 3):
@@ -160,8 +168,31 @@ def export(
                 yield t
 
         with user_errors():
-            write_measurements(out, counted(itertools.chain([first], rows)))
+            try:
+                write_measurements(out, counted(itertools.chain([first], rows)))
+            except TableError:
+                fail(_stored_refusal(st, device, day, joint, " (nothing written)"))
     say(f"wrote {count[0]} traverses to {out}", keep=(out,))
+
+
+def _stored_refusal(st: Any, device: str | None, day: str | None, joint: int | None, end: str = "") -> str:
+    """Which stored traverses no table can hold (a row stored before such values were refused: q3 = 5, a tilt of
+    4 rad), by their ids, and how to go on. The checks name a traverse by its place in a list from 0, which read as
+    a stored id: 'traverse 1' was the 2nd row, and `delete -t 1` removed another."""
+    from ..measurements import HEADER, TableError, Traverse, check_traverses
+
+    said: list[str] = []
+    for r in st.traverse_records(device=device, day=day, joint=joint):
+        try:
+            check_traverses([Traverse(*(r[c] for c in HEADER))])
+        except TableError as e:
+            said += [f"stored traverse {r['id']} ({r['device']}, {r['day']}): {p.removeprefix('traverse 0: ')}"
+                     for p in e.problems]
+        if len(said) >= 5:
+            break
+    return ("; ".join(said[:5]) + ": stored before such a value was refused, no fit or table takes it; leave it "
+            "out with `stickslip exclude -t ID --reason ...` (kept, with its reason) or remove it with "
+            f"`stickslip delete -t ID`, then run this again{end}")
 
 
 def _no_match(st: Any, device: str | None, day: str | None, joint: int | None) -> str:
@@ -219,8 +250,11 @@ def import_(
     """
     from ..measurements.history_file import is_history_file
     from ..procedures.table_import import import_table
+    from ..records import regular_file
     from ..storage.schema import stored_device
 
+    with user_errors():  # a file not there is said so, before a store is made ('is a measurement table' it was not)
+        regular_file(meas, "table")
     name = stored_device(device) if device is not None else None  # what the rows are stored under
     if name is None and not is_history_file(meas):  # refused before a store is made or opened
         fail(f"{meas} is a measurement table, which does not say its device: give the device it was measured on "
@@ -472,7 +506,7 @@ def fit(
     if record and meas is not None and device is None:  # before: filed under sim://, a guess (as import's was)
         fail("fit TABLE --record needs --device: the calibration is stored for the device that measured the table, "
              "and a table does not say which (e.g. -d mm3a:///dev/ttyUSB0)")
-    ts, where = _traverses_from(meas, db, device, day)
+    ts, where = _traverses_from(meas, db, device, day, checked=True)
     ids: list[int] = []
     if record and meas is None:  # link the stored traverses the fit used
         with open_store(db, must_exist=True) as st:
@@ -550,7 +584,7 @@ def report(
     from ..calibration import Calibration, CalibrationError, calibrate
     from ..report import build_report
 
-    ts, _where = _traverses_from(meas, db, device, None)
+    ts, _where = _traverses_from(meas, db, device, None, checked=True)
     if calibration is not None:
         with user_errors():
             cal = Calibration.load(calibration)

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import kinematics as kin
+from ..joints import MAX_STROKE, MAX_TURN
 from .rows import _TILT_LIMIT
 
 CHUNK_ROWS = 65536
@@ -64,8 +65,9 @@ def _within(joint: int, q: NDArray[np.float64]) -> NDArray[np.bool_]:
 def _pose_ok(joint: NDArray[np.int64], nums: dict[str, NDArray[np.float64]]) -> NDArray[np.bool_]:
     """Vectorised ``not check_pose(joint, nums)``: fixed joints within their stops, tilt within [-pi, pi]."""
     ok = np.ones(joint.size, dtype=bool)
-    for j in (1, 2, 3):
-        ok &= (joint == j) | _within(j, nums[f"q{j}"])
+    for j in (1, 2, 3):  # the moving joint's own q is ignored, but within a turn (a metre): the store refuses it else
+        q = nums[f"q{j}"]
+        ok &= ((joint == j) & (np.abs(q) <= (MAX_STROKE if j == 3 else MAX_TURN))) | _within(j, q)
     for name in ("theta", "psi"):
         v = nums[name]
         ok &= (-_TILT_LIMIT <= v) & (v <= _TILT_LIMIT)

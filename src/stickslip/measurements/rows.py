@@ -232,6 +232,8 @@ def parse_row(
         if problem:
             problems.append(f"{where}: {problem}")
     problems += [f"{where}: {p}" for p in check_pose(joint, nums, joints)]
+    if own := coordinate_problem(f"q{joint}", joint, nums[f"q{joint}"]):  # the moving joint's: ignored, but the
+        problems.append(f"{where}: {own}")  # store refuses it (no arm's): a row read here was refused unnamed there
     if problems:
         return None, problems
     return Traverse(
@@ -418,6 +420,9 @@ def _value_problems(t: Traverse) -> list[str]:
 
 def _finite_real(v: object) -> bool:
     """A finite real number (a Python or numpy int or float; not a bool, not text)."""
-    if type(v) is float or type(v) is int:  # the common case without the ABC's isinstance (0.7 µs a call)
-        return math.isfinite(v)
-    return isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
+    try:  # an int too large for a float (10**400) is none: math.isfinite raised OverflowError, a traceback
+        if type(v) is float or type(v) is int:  # the common case without the ABC's isinstance (0.7 µs a call)
+            return math.isfinite(v)
+        return isinstance(v, numbers.Real) and not isinstance(v, bool) and math.isfinite(v)
+    except OverflowError:
+        return False

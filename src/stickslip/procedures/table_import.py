@@ -17,11 +17,13 @@ history is the same record. It is told from a table by its first character, ``{`
 from __future__ import annotations
 
 import hashlib
+import json
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
+from ..devices.base import redact_url
 from ..measurements import TableError, Traverse, stream_measurement_table
 from ..measurements.history_file import Provenance, is_history_file, read_history
 from ..records import regular_file
@@ -87,11 +89,12 @@ def _named(store: ImportStore, given: str | None, device: str | None) -> tuple[s
     table or a version-1 history file, and no ``device``), a name that is no device, or another than ``device``
     (told with --device)."""
     if given is None:
-        return None, "no device named (a history file of version 1): give it with --device URL"
+        return None, ("no device named (a history file of version 1, or a row that leaves it out): give it with "
+                      "--device URL")
     try:
         name = store.device_name(given)
-    except ValueError as e:
-        return None, f"device {e}"
+    except ValueError as e:  # said with the name as written (redacted): '#arm=x' was 'device device URL '' ...'
+        return None, f"the device it names, {json.dumps(redact_url(given))}, is none: {e}"
     if device is not None and name != (told := store.device_name(device)):
         return None, (f"the file names the device {name}, not {told} (--device): leave --device out to store each "
                       "row under the device it names")

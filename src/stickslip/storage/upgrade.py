@@ -99,7 +99,8 @@ def key_devices(con: Backend) -> list[str]:
     that name (nothing is deleted: a day stored under both becomes one session; a state key
     both hold is kept under ``KEY (from OLD URL)``). The content keys of the moved or
     renamed traverses are recomputed under the new name. A URL that names no device
-    (:func:`stored_device` refuses it) keeps its name.
+    (:func:`stored_device` refuses it) keeps its name, its secret redacted: the note that the copy alone holds
+    the passwords is then true.
     """
     rows = [(int(r["id"]), str(r["url"])) for r in con.execute("SELECT id, url FROM devices ORDER BY id")]
     keys = {did: _key(url) for did, url in rows}
@@ -133,10 +134,12 @@ def key_devices(con: Backend) -> list[str]:
 
 
 def _key(url: str) -> str:
-    try:
-        return stored_device(url)
-    except ValueError:
-        return url
+    for name in (url, redact_url(url)):  # 'anc300://u:pw@h:xx' (a port that is no number) names no device
+        try:
+            return stored_device(name)
+        except ValueError:
+            pass
+    return redact_url(url)  # kept as written but for its secret (an old store's name no URL rule reads)
 
 
 def _url(con: Backend, did: int) -> str:
