@@ -1054,3 +1054,35 @@ def test_unlock_releases_a_lock_row_that_cannot_be_read(tmp_path, cal_path, faul
     r = run("where", "-d", spelling, "--db", db, "--unlock", "--offline")
     assert r.exit_code == 0, r.output
     assert run(*move).exit_code == 0
+
+
+def test_kept_positions_no_command_can_read_are_replaced_by_recording_anew_never_a_newer_releases(tmp_path):
+    """A kept tilt of 4 rad (a hand edit; an older release's record) made every command of the device fail,
+    `where --theta 0` and `where --set` too: the device was blocked for good (audit61). Now recording positions
+    anew replaces an unreadable record, with a warning and the joints not set unreferenced; the error says so.
+    A record of a newer release is never replaced."""
+    import sqlite3
+
+    db = tmp_path / "s.db"
+    assert run("where", "-d", "sim://", "--db", db, "--offline", "--set", "3=min").exit_code == 0
+    con = sqlite3.connect(db)
+    con.execute("UPDATE device_state SET value = replace(value, '\"theta\": 0.0', '\"theta\": 4.0') "
+                "WHERE key = 'positions'")
+    con.commit()
+    line = one_error(run("where", "-d", "sim://", "--db", db, "--offline"), "theta = 4 rad is outside [-pi, pi]",
+                     "record them anew with `stickslip where --set J=VALUE`")
+    assert "unreadable" in line
+    r = run("where", "-d", "sim://", "--db", db, "--offline", "--set", "2=max", "--json")
+    assert r.exit_code == 0, r.output
+    assert "replaced by what was recorded now; the joints not set are unreferenced" in r.stderr
+    joints = json.loads(r.stdout)["joints"]
+    assert [j["source"] for j in joints] == ["default", "set", "default"]  # joint 3's old 'set' is not kept
+    assert run("where", "-d", "sim://", "--db", db, "--offline").exit_code == 0
+
+    con.execute("UPDATE device_state SET value = '{\"version\": 99, \"theta\": 4.0}' WHERE key = 'positions'")
+    con.commit()
+    con.close()
+    one_error(run("where", "-d", "sim://", "--db", db, "--offline", "--set", "3=min"), "version 99 is newer")
+    with sqlite3.connect(db) as c:  # left as the newer release wrote it
+        assert c.execute("SELECT value FROM device_state WHERE key = 'positions'").fetchone()[0].startswith(
+            '{"version": 99')

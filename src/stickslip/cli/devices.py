@@ -526,6 +526,8 @@ def where(
             )
         except ReferenceRefused as e:
             fail(f"--set {items[e.index]}: {e}")
+    if result.replaced is not None:  # on stderr, so --json's document is the same
+        warn(f"{result.replaced}: replaced by what was recorded now; the joints not set are unreferenced")
     if json_out:
         print_json(result.as_dict())
         return

@@ -16,7 +16,7 @@ from typing import Any, Protocol, runtime_checkable
 from urllib.parse import urlsplit
 
 from ..devices.base import DeviceError, controller_of, device_key, open_device
-from ..devices.positions import DeviceState, StateStore, load_state, save_state
+from ..devices.positions import DeviceState, StateStore, UnreadableState, load_state, save_state
 from ..joints import JointSet
 from ..processes import holder_running, process_gone
 from ..units import format_position
@@ -176,6 +176,9 @@ class WhereResult:
         Why the device was not asked: another process drives it (the :class:`~.move.DeviceBusy` message).
     others : tuple of str
         Other spellings of this controller under which positions are kept too (:func:`also_kept`).
+    replaced : str or None
+        Why the kept positions were replaced by the defaults before recording (they could not be read:
+        :class:`~stickslip.devices.positions.UnreadableState`); ``None`` when they were read.
     """
 
     device: str
@@ -184,6 +187,7 @@ class WhereResult:
     info: dict[str, Any] | None = field(default=None)
     busy: str | None = None
     others: tuple[str, ...] = ()
+    replaced: str | None = None
 
     def as_dict(self) -> dict[str, object]:
         """The JSON shape of ``stickslip where --json``."""
@@ -234,8 +238,14 @@ def where(
         store.set_state(lock, "lock", "null")
     records = bool(references) or pose != PoseUpdate()
     held: AbstractContextManager[object] = device_lock(store, lock) if hold_lock and records else nullcontext()
+    replaced = None
     with held:  # a joint referenced while another process moves it would be kept where it no longer is
-        state = load_state(store, key, joints)
+        try:
+            state = load_state(store, key, joints)
+        except UnreadableState as e:  # no command could read them: recording positions anew is the way out
+            if not records:
+                raise
+            state, replaced = DeviceState.default(key, joints), str(e).split("; record them anew")[0]
         changed = pose.apply(state)
         for i, (joint, q) in enumerate(references):
             try:
@@ -250,7 +260,7 @@ def where(
         busy = _driven_by(store.get_state(lock, "lock"), lock)
         if busy is None:  # a probe beside a move would talk on the link the move is driving
             info = probe(device)
-    return WhereResult(key, state, tuple(changed), info, busy, also_kept(store, key))
+    return WhereResult(key, state, tuple(changed), info, busy, also_kept(store, key), replaced)
 
 
 def _driven_by(holder: object, lock: str) -> str | None:
