@@ -1050,7 +1050,8 @@ def test_unlock_releases_a_lock_row_that_cannot_be_read(tmp_path, cal_path, faul
         con.execute("UPDATE device_state SET value = 'not json{' WHERE key = 'lock'")
     move = ("move", "--trust-calibration", "--from-unreferenced", "-d", "faulty://arm", "-c", cal_path, "--db", db,
             "-j", 3, "--by", "1um")
-    one_error(run(*move), f"the stored 'lock' of {spelling}")
+    line = one_error(run(*move), f"the stored 'lock' of {spelling}")
+    assert line.endswith(f"release it with `stickslip where -d {spelling} --unlock`"), line  # the way out, said
     r = run("where", "-d", spelling, "--db", db, "--unlock", "--offline")
     assert r.exit_code == 0, r.output
     assert run(*move).exit_code == 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from typing import TYPE_CHECKING, Any
 
-from ..devices.base import redact_text, redact_url
+from ..devices.base import command_url, redact_text, redact_url
 from ..processes import process_gone
 from ..records import loads_json
 from .base import _Base
@@ -123,16 +123,25 @@ class StateStore(_Base):
         ).fetchall()
         for r in rows:
             if lock_name(str(r["url"])) == mine:
-                held = self._json(r["value"], str(r["url"]), "lock")
+                held = self._readable_lock(r["value"], str(r["url"]))
                 if isinstance(held, dict) and not process_gone(held):
                     return {**held, "device": str(r["url"])}
         return None
 
     def _lock_row(self, con: Backend, device: str) -> tuple[int, Any]:
-        """``device``'s id and its stored lock holder (decoded, or ``None``), read inside the write ``con``."""
+        """``device``'s id and its stored lock holder (decoded, or ``None``), read inside the write ``con``;
+        :class:`StoreError` with the way out (``where --unlock``) for a row that cannot be read."""
         dev = self._device_id(con, device)
         row = con.execute("SELECT value FROM device_state WHERE device_id = ? AND key = 'lock'", (dev,)).fetchone()
-        return dev, None if row is None else self._json(row[0], device, "lock")
+        return dev, None if row is None else self._readable_lock(row[0], device)
+
+    def _readable_lock(self, text: object, device: str) -> Any:
+        """A stored lock row decoded; :class:`StoreError` with the way out for one that cannot be read."""
+        try:
+            return self._json(text, device, "lock")
+        except StoreError as e:  # a hand edit, a bad sector: it names no holder, and --unlock releases it
+            raise StoreError(f"{e}; if no stickslip process drives {redact_url(device)} now, release it with "
+                             f"`stickslip where -d {command_url(device)} --unlock`") from None
 
     def release_lock(self, device: str, pid: int) -> None:
         """Release ``device``'s lock if process ``pid`` holds it."""
