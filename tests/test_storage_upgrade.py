@@ -364,3 +364,27 @@ def test_an_old_name_that_names_no_device_loses_its_password_in_the_upgrade(tmp_
     with Store.open(db) as st:
         assert sorted(d["url"] for d in st.devices()) == ["anc300://h", "anc300://u:***@h:xx"]
         assert len(st.traverses(device="anc300://u:***@h:xx")) == 2
+
+
+def test_an_upgrade_redacts_the_passwords_kept_in_traverses_texts_and_says_its_copy_holds_them(tmp_path):
+    """A store written before every text kept with a row was redacted (2026-11-28) could hold a password in a
+    traverse's source or exclusion reason; the upgrade renamed the devices but kept those, and export --json then
+    carried them out (audit61). Now the upgrade redacts them in place as a write today would; the note says the
+    copy (the file as it was) still holds them."""
+    db = tmp_path / "lab.db"
+    _schema_3_store(db, {"anc300://h:7230": ROWS[:3]})
+    con = sqlite3.connect(db)
+    con.execute("UPDATE traverses SET source = 'anc300://admin:hunter2@h:7230' WHERE id = 1")
+    con.execute("UPDATE traverses SET excluded = 'cable: see ftp://u:s3cret@lab/log' WHERE id = 2")
+    con.commit()
+    con.close()
+    r = CliRunner().invoke(app, ["export", "--json", "--db", str(db), "-o", str(tmp_path / "h.jsonl")])
+    assert r.exit_code == 0, r.output
+    said = " ".join(r.stderr.split())
+    copy = tmp_path / "lab.v3.db"
+    assert (f"note: 2 traverse(s)' how, source or reason of the old store held a password as written (stores made "
+            f"before 2026-11-28); the upgraded store holds none, but its copy {copy} still does") in said, said
+    out = (tmp_path / "h.jsonl").read_text(encoding="utf-8")
+    assert "hunter2" not in out and "s3cret" not in out and "admin:***@h:7230" in out and "u:***@lab" in out
+    assert b"hunter2" not in db.read_bytes() and b"s3cret" not in db.read_bytes()
+    assert b"hunter2" in copy.read_bytes()  # the file as it was

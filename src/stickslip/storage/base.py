@@ -29,6 +29,7 @@ from .upgrade import (
     _remove_part,
     copy_before_upgrade,
     key_devices,
+    redact_texts,
     row_traverse,
     secret_names,
 )
@@ -164,13 +165,10 @@ class _Base:
             if version < 3:
                 self._backfill_content(con)
             if 1 <= version < KEYED_AT:
-                secrets = secret_names(con)
+                secrets, texts = secret_names(con), redact_texts(con)
                 self.upgrade_notes = key_devices(con)
-                if secrets and self.upgrade_copy is not None:  # the copy is the file as it was, secrets and all
-                    self.upgrade_notes.append(
-                        f"{secrets} device name(s) of the old store held a password as written (stores made before "
-                        f"2026-11-24); the upgraded store holds none, but its copy {self.upgrade_copy} still does: "
-                        "delete the copy once you no longer need it, or keep it where only you can read it")
+                if (secrets or texts) and self.upgrade_copy is not None:  # the copy is the file as it was
+                    self.upgrade_notes.append(_copy_secrets_note(secrets, texts, self.upgrade_copy))
         return version
 
     def _backfill_content(self, con: Backend) -> None:
@@ -421,4 +419,13 @@ def _require_traverses(con: Backend, ids: list[int], marks: str) -> None:
         raise ValueError(f"no stored traverse with id {', '.join(map(str, missing))}")
 
 
-
+def _copy_secrets_note(names: int, texts: int, copy: Path) -> str:
+    """The note that an upgrade's copy still holds the passwords the old store kept (``names`` device names,
+    ``texts`` traverses' how, source or reason), which the upgraded store no longer does."""
+    parts = [f"{names} device name(s)"] if names else []
+    parts += [f"{texts} traverse(s)' how, source or reason"] if texts else []
+    what = " and ".join(parts)
+    since = "2026-11-28" if texts else "2026-11-24"
+    return (f"{what} of the old store held a password as written (stores made before {since}); the upgraded store "
+            f"holds none, but its copy {copy} still does: delete the copy once you no longer need it, or keep it "
+            "where only you can read it")

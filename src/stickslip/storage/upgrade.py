@@ -10,7 +10,7 @@ import secrets
 from pathlib import Path
 from typing import Any
 
-from ..devices.base import redact_url
+from ..devices.base import redact_text, redact_url
 from ..measurements import Traverse
 from ..records import temp_stem
 from .backend import Backend
@@ -90,6 +90,24 @@ def secret_names(con: Backend) -> int:
     names every device by its key (no secret), but the copy made before it keeps the old names.
     """
     return sum(str(r["url"]) != redact_url(str(r["url"])) for r in con.execute("SELECT url FROM devices"))
+
+
+def redact_texts(con: Backend) -> int:
+    """Redact, in place, the how, source and reason kept with each traverse; the count of traverses changed.
+
+    A store written before every text kept with a row went through the one redaction
+    (2026-11-28) may hold a password in a source (``anc300://u:pw@h``) or a reason; an upgrade
+    puts its texts through it as a write today would (the copy made before keeps them as they were).
+    """
+    changed = 0
+    rows = con.execute("SELECT id, how, source, excluded FROM traverses").fetchall()
+    for r in rows:
+        was = (r["how"], r["source"], r["excluded"])
+        now = tuple(None if v is None else redact_text(str(v)) for v in was)
+        if now != was:
+            con.execute("UPDATE traverses SET how = ?, source = ?, excluded = ? WHERE id = ?", (*now, r["id"]))
+            changed += 1
+    return changed
 
 
 def key_devices(con: Backend) -> list[str]:
