@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from stickslip import kinematics as kin
+from stickslip.joints import coordinate_problem
 from stickslip.models import direction_label
 from stickslip.records import MAX_TABLE_BYTES, atomic_write_text, read_text_bounded
 
@@ -310,6 +311,11 @@ def parse_row(row: dict[str, str], where: str) -> tuple[Traverse | None, list[st
         if problem:
             problems.append(f"{where}: {problem}")
     problems += [f"{where}: {p}" for p in check_pose(joint, nums)]
+    # the moving joint's own coordinate is not used, but no arm is beyond a full turn (joints 1, 2) or a metre
+    # (joint 3): such a row is refused, not read and then refused by the store unnamed (the contract since audit61)
+    own = nums[f"q{joint}"]
+    if abs(own) > (1.0 if joint == 3 else 2 * math.pi):
+        problems.append(f"{where}: {coordinate_problem(f'q{joint}', joint, own)}")
     if problems:
         return None, problems
     return Traverse(
