@@ -1087,3 +1087,18 @@ def test_kept_positions_no_command_can_read_are_replaced_by_recording_anew_never
     with sqlite3.connect(db) as c:  # left as the newer release wrote it
         assert c.execute("SELECT value FROM device_state WHERE key = 'positions'").fetchone()[0].startswith(
             '{"version": 99')
+
+
+def test_a_lock_holder_missing_fields_is_shown_with_question_marks_not_none(tmp_path):
+    """A lock row a hand edit or an older release left without pid, host or since read 'pid None on None since
+    None' in the refusal (audit60)."""
+    from stickslip.procedures.move import DeviceBusy, device_lock, holder_text
+    from stickslip.storage import Store
+
+    assert holder_text({"host": "bench-pc"}) == "pid ? on bench-pc since ?"
+    assert holder_text({"pid": 7, "host": "", "since": "2026-11-22T10:00:00"}) == "pid 7 on ? since 2026-11-22T10:00:00"
+    with Store.open(tmp_path / "s.db") as st:
+        st.set_state("anc300://h", "lock", {"host": "rig-2.lab"})
+        with pytest.raises(DeviceBusy) as e, device_lock(st, "anc300://h:7230"):
+            pass
+    assert "(pid ? on rig-2.lab since ?)" in str(e.value) and "None" not in str(e.value)

@@ -87,6 +87,7 @@ __all__ = [
     "claimed",
     "joint_line",
     "device_lock",
+    "holder_text",
     "drive",
     "exact_positions",
     "failure_text",
@@ -171,6 +172,13 @@ class LockStore(Protocol):
     def release_lock(self, device: str, pid: int) -> None: ...
 
 
+def holder_text(holder: dict[str, Any]) -> str:
+    """``pid P on HOST since T`` of a lock's holder, ``?`` for a field a hand-edited or older row lacks."""
+    pid, host, since = (holder.get(k) for k in ("pid", "host", "since"))
+    shown = ["?" if v is None or v == "" else redact_text(str(v))[:80] for v in (pid, host, since)]
+    return f"pid {shown[0]} on {shown[1]} since {shown[2]}"
+
+
 @contextmanager
 def device_lock(store: LockStore, device: str) -> Iterator[dict[str, Any]]:
     """Hold ``device``'s lock for the ``with`` block; :class:`DeviceBusy` if another process has it."""
@@ -192,8 +200,7 @@ def device_lock(store: LockStore, device: str) -> Iterator[dict[str, Any]]:
         )
         through = f" through {other} (this controller written another way)" if other else ""
         raise DeviceBusy(
-            f"{device} is being driven by another stickslip process{through} (pid {holder.get('pid')} on "
-            f"{holder.get('host')} since {holder.get('since')}); {way_out}"
+            f"{device} is being driven by another stickslip process{through} ({holder_text(holder)}); {way_out}"
         )
     try:
         yield me

@@ -20,7 +20,7 @@ from ..devices.positions import DeviceState, StateStore, UnreadableState, load_s
 from ..joints import JointSet
 from ..processes import holder_running, process_gone
 from ..units import format_position
-from .move import DeviceBusy, LockStore, PoseUpdate, device_lock, track_fields
+from .move import DeviceBusy, LockStore, PoseUpdate, device_lock, holder_text, track_fields
 
 __all__ = [
     "DeviceUnreachable", "ReferenceRefused", "WhereResult", "WhereStore", "also_kept", "also_kept_warning",
@@ -267,10 +267,7 @@ def _driven_by(holder: object, lock: str) -> str | None:
     """Who holds ``lock`` (read, not taken: a read-only database still shows), ``None`` if nobody or a process gone."""
     if not isinstance(holder, dict) or process_gone(holder):
         return None
-    return (
-        f"{lock} is being driven by another stickslip process (pid {holder.get('pid')} on {holder.get('host')} "
-        f"since {holder.get('since')})"
-    )
+    return f"{lock} is being driven by another stickslip process ({holder_text(holder)})"
 
 
 def refuse_unlocking_a_running_holder(holder: object, device: str) -> None:
