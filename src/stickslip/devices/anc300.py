@@ -25,7 +25,13 @@ only carries its bytes over our transports (:class:`TransportAdapter`) and wraps
   ``stp`` once, then waits with ``stepw AXIS`` until the burst is done;
 * ``setf`` takes integer Hz in 1..10000 and ``setv`` volts in 0..150 (validated here
   first, naming the range; nothing is clipped);
-* ``stop AXIS`` stops; closing stops every axis and grounds it (mode ``gnd``).
+* ``stop AXIS`` stops; closing stops every axis and grounds it (mode ``gnd``);
+* a stop from another thread while ``step()`` waits for an answer (Bluesky's ``stop()``,
+  the server's STOP, ``rigstop``) is written at once, and the stepping thread reads its
+  answer after the one it waits for: one thread reads the line, so no answer is taken for
+  another command's. That ``step()`` raises ``StepsUncertain`` (0 to ``n`` steps made:
+  ``stepw`` does not say how far a stopped burst went; nothing made if ``stepu`` was not
+  sent yet). Other commands take turns, one command and its answer at a time.
 
 Assumptions: the serial console speaks the same console as telnet, password prompt
 included (check: ``stickslip -vv where -d anc300:///dev/ttyUSB0`` logs ``READ:`` of the
@@ -46,6 +52,7 @@ from __future__ import annotations
 
 import logging
 import math
+import threading
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from typing import Any, TypeVar
@@ -57,6 +64,7 @@ from .base import (
     DeviceError,
     DeviceInfo,
     RedactSecrets,
+    StepsUncertain,
     check_setting,
     check_steps,
     redact_url,
@@ -125,6 +133,8 @@ def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:
             self.connection = transport
             self.read_timeout = timeout
             self.sync_answer: str | None = None
+            self.write_lock = threading.Lock()  # a stop from another thread writes while a burst's answer is awaited
+            self.owed = 0  # answers to stops written by another thread, for the stepping thread to read
 
         def _write(self, command: str, **kwargs: Any) -> None:
             self._write_bytes((command + "\r\n").encode("ascii"))
@@ -136,10 +146,11 @@ def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:
                 where = f"ANC300 on {self.transport.name}"
                 self.transport.resync([(b"ver\r\n", _version_then_ok(self.sync_answer))], b"\r\n", where,
                                       self.read_timeout)
-            stale = self.transport.drain()
-            if stale.strip(b"\r\n\t "):
-                log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
-            self.transport.write(content)
+            with self.write_lock:  # with owed stop answers unread nothing is stale: the stepping thread reads them
+                stale = self.transport.drain() if not self.owed else b""
+                if stale.strip(b"\r\n\t "):
+                    log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
+                self.transport.write(content)
 
         def _read(self, **kwargs: Any) -> str:
             raw = self.transport.read_until(b"\r\n", timeout=self.read_timeout)
@@ -240,6 +251,8 @@ class ANC300:
         except Exception as e:  # pymeasure raises a bare Exception on a wrong password
             msg = str(e).replace(password, "***") if password else str(e)
             raise DeviceError(f"ANC300 on {transport.name}: {msg}{_login_advice(msg)}") from None
+        self._io = threading.RLock()  # one exchange (command and answer) at a time; a step() holds it throughout
+        self._stepper: int | None = None  # the thread in step(): it alone reads the line then
         self._mode: dict[int, str | None] = dict.fromkeys(self.axes)
         self._hz: dict[int, float | None] = dict.fromkeys(self.axes)
         self._volt: dict[int, float | None] = dict.fromkeys(self.axes)
@@ -257,7 +270,8 @@ class ANC300:
     def _device(self, call: Callable[[], T], what: str) -> T:
         """Run a pymeasure call; the device's ``ERROR`` answers become :class:`DeviceError`."""
         try:
-            return call()
+            with self._io:
+                return call()
         except DeviceError as e:
             raise DeviceError(f"ANC300 on {self.transport.name}, {what!r}: {e}") from None
         except ValueError as e:  # pymeasure: "Error after previous command with message ..." (the console's lines)
@@ -323,25 +337,62 @@ class ANC300:
 
         ``n = 0`` sends nothing (the ANC300 would read 0 as "move until stopped").
         On an error or no answer the axis is stopped (best effort) and
-        :class:`DeviceError` raised.
+        :class:`DeviceError` raised. A :meth:`stop` from another thread meanwhile is
+        sent at once; this thread reads its answer, and raises
+        :class:`~stickslip.devices.base.StepsUncertain`: ``stepw`` does not say how many
+        steps a stopped burst made (between 0 and ``n``; 0 if ``stepu`` was not sent yet).
         """
         ax = self._axis(joint)
         n = check_steps(n)
         if n == 0:
             return
-        try:
-            if self._mode[int(joint)] != "stp":
-                self._device(lambda: setattr(ax, "mode", "stp"), f"setm {ax.id} stp")
-                self._mode[int(joint)] = "stp"
-            hz = self.frequency(joint)
-            cmd = f"stepu {ax.id} {n}" if n > 0 else f"stepd {ax.id} {-n}"
-            assert n != 0  # never "stepu X 0": that is a continuous move
-            self._device(lambda: ax.move_raw(n), cmd)
-            with self._read_timeout(self.timeout + 1.5 * abs(n) / hz):
-                self._device(lambda: ax.ask("stepw"), f"stepw {ax.id}")
-        except BaseException:  # refused, unanswered, garbage, or Ctrl-C: stop the axis
-            self.stop(joint)
-            raise
+        with self._io:
+            self._stepper = threading.get_ident()
+            try:
+                sent = self._burst(ax, joint, n)
+            except BaseException:  # refused, unanswered, garbage, or Ctrl-C: stop the axis
+                self._end_step()
+                self.stop(joint)
+                raise
+            if self._end_step():
+                cmd = f"stepu {ax.id} {n}" if n > 0 else f"stepd {ax.id} {-n}"
+                what = (f"{cmd} was stopped by stop() from another thread before stepw answered: the console does "
+                        f"not say how many steps it made (0 to {n})" if sent
+                        else f"{cmd} was not sent: stop() was called from another thread")
+                raise StepsUncertain(f"ANC300 on {self.transport.name}: {what}", 0, n if sent else 0)
+
+    def _burst(self, ax: Any, joint: int, n: int) -> bool:
+        """``stepu``/``stepd`` then ``stepw``, unless a stop from another thread came first; whether it was sent."""
+        if self._mode[int(joint)] != "stp":
+            self._device(lambda: setattr(ax, "mode", "stp"), f"setm {ax.id} stp")
+            self._mode[int(joint)] = "stp"
+        hz = self.frequency(joint)
+        if self.adapter.owed:
+            return False
+        cmd = f"stepu {ax.id} {n}" if n > 0 else f"stepd {ax.id} {-n}"
+        assert n != 0  # never "stepu X 0": that is a continuous move
+        self._device(lambda: ax.move_raw(n), cmd)
+        if self.adapter.owed:
+            return True
+        with self._read_timeout(self.timeout + 1.5 * abs(n) / hz):
+            self._device(lambda: ax.ask("stepw"), f"stepw {ax.id}")
+        return True
+
+    def _end_step(self) -> int:
+        """Leave :meth:`step`: read the answers to the stops another thread wrote meanwhile; how many it wrote."""
+        with self.adapter.write_lock:
+            owed = int(self.adapter.owed)
+            self.adapter.owed = 0
+            self._stepper = None
+        for _ in range(owed):
+            if self.transport.silent:  # the console stopped answering: the next command re-synchronises the line
+                break
+            try:
+                with self._read_timeout(min(self.timeout, 0.5)):
+                    self._ctrl.read()
+            except Exception as e:  # noqa: BLE001 - best effort, like stop() itself
+                log.warning("no answer to a stop sent from another thread to %s: %s", self.transport.name, e)
+        return owed
 
     def _send_unanswered(self, commands: Sequence[str]) -> None:
         """Send best-effort ``commands`` without waiting for answers (the console stopped answering). Never raises."""
@@ -357,9 +408,31 @@ class ANC300:
 
         When the console has stopped answering (a reply timed out), the stops are sent
         without waiting for answers: the URL's timeout is the whole wait for a fault,
-        not that plus a wait per axis.
+        not that plus a wait per axis. From another thread during :meth:`step`, the stops
+        are written at once and the stepping thread reads their answers (one reader: no
+        answer is taken for another command's); that ``step()`` raises ``StepsUncertain``.
         """
         joints = sorted(self.axes) if joint is None else [int(joint)]
+        if self._stop_aside([f"stop {self._axis(j).id}" for j in joints]):
+            return
+        with self._io:
+            self._stop_here(joints)
+
+    def _stop_aside(self, commands: Sequence[str]) -> bool:
+        """During a step() in another thread, write ``commands`` at once and leave their answers to it; whether so."""
+        with self.adapter.write_lock:
+            if self._stepper is None or self._stepper == threading.get_ident():
+                return False
+            for command in commands:
+                try:
+                    self.transport.write((command + "\r\n").encode("ascii"))
+                except Exception as e:  # noqa: BLE001 - best effort
+                    log.warning("could not send %r to %s: %s", command, self.transport.name, e)
+                    break
+                self.adapter.owed += 1
+        return True
+
+    def _stop_here(self, joints: Sequence[int]) -> None:
         if getattr(self.transport, "silent", False):
             self._send_unanswered([f"stop {self._axis(j).id}" for j in joints])
             return
