@@ -18,7 +18,7 @@ pytest.importorskip("pymeasure")
 from stickslip import kinematics as kin  # noqa: E402
 from stickslip.devices import DeviceError, open_device  # noqa: E402
 from stickslip.devices.anc300 import ANC300  # noqa: E402
-from stickslip.devices.transport import FakeTransport, Transport  # noqa: E402
+from stickslip.devices.transport import FakeTransport  # noqa: E402
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
 from stickslip.sim.emulators import ANC300Emulator  # noqa: E402
 
@@ -284,60 +284,21 @@ def test_the_howto_page_runs_on_the_emulator(tmp_path, monkeypatch):
     assert sim.position(3) == pytest.approx(30e-6, abs=1.5e-6)  # planned from the lower stop: 30 um, within a step
 
 
-class _HeldStepw(Transport):
-    """A console on its own thread's terms: answers arrive through ``_recv`` (as a socket's do, never written into
-    the reader's buffer), in transcript order. The transcript holds stepw's answer until a stop is written: the stop
-    cuts the burst short, then stepw answers OK, then the stop does. ``stepw_sent`` is set when stepw is written."""
-
-    def __init__(self, transcript):
-        import threading
-
-        super().__init__("fake:7230", 0.05)
-        self._expected = [(s.encode() if isinstance(s, str) else s, r.encode() if isinstance(r, str) else r)
-                          for s, r in transcript]
-        self._inbox = b""
-        self._arrived = threading.Condition()
-        self.stepw_sent = threading.Event()
-        self._answer(None)
-
-    def _answer(self, sent):
-        with self._arrived:
-            if sent is not None:
-                want, reply = self._expected.pop(0)
-                assert sent == want, (sent, want)
-                self._inbox += reply or b""
-            while self._expected and self._expected[0][0] is None:
-                self._inbox += self._expected.pop(0)[1]
-            self._arrived.notify_all()
-
-    def _send(self, data):
-        self._answer(data)
-        if data == b"stepw 1\r\n":
-            self.stepw_sent.set()
-
-    def _recv(self, timeout):
-        with self._arrived:
-            self._arrived.wait_for(lambda: self._inbox, timeout)
-            data, self._inbox = self._inbox, b""
-        return data
-
-    def _close(self):
-        pass
-
-
 def test_a_stop_from_another_thread_during_stepw_leaves_the_burst_uncertain_and_the_line_in_step():
     # audit60's question 5: the stop was read on the stopping thread while the stepping thread read stepw's answer,
     # two readers on one line; the burst cut short at 40 steps was reported made in full (100)
     import threading
 
-    t = _HeldStepw([*LOGIN, *_lines(
+    from held_console import HeldConsole
+
+    t = HeldConsole([*LOGIN, *_lines(
         ("setm 1 stp", "OK\r\n"),
         ("getf 1", "frequency = 1000 Hz\r\nOK\r\n"),
         ("stepu 1 100", "OK\r\n"),
         ("stepw 1", None),  # held: the burst runs
         ("stop 1", "OK\r\nOK\r\n"),  # stepw's answer (the axis stopped, 40 made), then the stop's
         ("getv 1", "voltage = 30.000000 V\r\nOK\r\n"),
-    )])
+    )], name="fake:7230")
     dev = ANC300(t, password=PASSWORD, timeout=5.0, query_delay=0.0)
     outcome: list[object] = []
 
@@ -348,9 +309,9 @@ def test_a_stop_from_another_thread_during_stepw_leaves_the_burst_uncertain_and_
         except Exception as e:  # noqa: BLE001
             outcome.append(e)
 
-    worker = threading.Thread(target=stepping)
+    worker = threading.Thread(target=stepping, daemon=True)
     worker.start()
-    assert t.stepw_sent.wait(5.0)
+    assert t.held_sent.wait(5.0)
     dev.stop(1)  # from this thread, while the worker waits for stepw's answer
     worker.join(10.0)
     assert not worker.is_alive()
@@ -360,4 +321,4 @@ def test_a_stop_from_another_thread_during_stepw_leaves_the_burst_uncertain_and_
     assert isinstance(result, StepsUncertain), result  # not 100 made: the emulated console made 40
     assert (result.made, result.at_most) == (0, 100)  # the true 40 inside
     assert dev.voltage(1) == 30.0  # the next command reads its own answer: both OKs were read, no more
-    assert t._expected == []
+    assert t.expected == []

@@ -210,3 +210,38 @@ def test_any_step_count_is_sent_as_well_formed_bursts_summing_to_it(n: int, join
     assert sum(counts) == n
     assert all(0 < abs(k) <= MAX_COARSE for k in counts)
     assert len(counts) == -(-abs(n) // MAX_COARSE)  # the fewest bursts
+
+
+def test_a_stop_from_another_thread_during_a_coarse_leaves_it_uncertain_and_sends_no_further_burst() -> None:
+    # audit60's question 5: stop() read the line (read_available) while the stepping thread waited for the coarse's
+    # answer, and took it: the step still waited after 10 s (its wait is 5 s + 1.5 x the burst's 65.5 s). And a stop
+    # ended only the chunk under way of a long step. A console that cuts the burst short at 40 000 steps of 65535
+    import threading
+
+    from held_console import HeldConsole
+
+    from stickslip.devices.base import StepsUncertain
+
+    t = HeldConsole([VERSION, ("coarse C +65535;", None), ("stop;", "o\t\ro\t\r"),
+                     ("counterread;", "o\t0 0 40000 0\r")], name="/dev/fake")
+    dev = NanoControl(t, timeout=5.0)
+    outcome: list[object] = []
+
+    def stepping() -> None:
+        try:
+            dev.step(3, 100000)  # two chunks: 65535 and 34465
+            outcome.append(100000)
+        except Exception as e:  # noqa: BLE001
+            outcome.append(e)
+
+    worker = threading.Thread(target=stepping, daemon=True)
+    worker.start()
+    assert t.held_sent.wait(5.0)
+    dev.stop()  # from this thread, while the worker waits for the coarse's answer
+    worker.join(10.0)
+    assert not worker.is_alive()
+    (result,) = outcome
+    assert isinstance(result, StepsUncertain), result
+    assert (result.made, result.at_most) == (0, 65535)  # the true 40 000 inside; the second chunk never sent
+    assert dev.counters()[3] == 40000  # the next command reads its own answer
+    assert t.expected == []

@@ -25,6 +25,7 @@ import logging
 import os
 import select
 import socket
+import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
 
@@ -35,6 +36,7 @@ __all__ = [
     "SerialTransport",
     "SocketTransport",
     "FakeTransport",
+    "StopAside",
     "TranscriptError",
     "serial_port_name",
     "windows_com_port",
@@ -204,6 +206,71 @@ class Transport:
 
     def __repr__(self) -> str:
         return f"<{type(self).__name__} {self.name}>"
+
+
+class StopAside:
+    """One thread steps and reads the line; a stop from another thread is only written, its answer left to it.
+
+    Two threads reading one line take each other's answers (audit60). During a ``step()``
+    (:meth:`begin` .. :meth:`end`) :meth:`send` from another thread writes at once (prompt:
+    no wait for the burst's answer) and counts the answer owed; the stepping thread sees
+    :attr:`owed`, reads those answers after the one it waits for, and stops stepping.
+    :meth:`write` is every other write: one at a time, and unread bytes are discarded
+    first (stale) only when no stop's answer is owed.
+    """
+
+    def __init__(self, transport: Transport) -> None:
+        self.transport = transport
+        self.wire = threading.Lock()
+        self.stepper: int | None = None
+        self.owed = 0
+
+    def begin(self) -> None:
+        """The calling thread starts a step: it alone reads the line until :meth:`end`."""
+        with self.wire:
+            self.stepper, self.owed = threading.get_ident(), 0
+
+    def end(self) -> int:
+        """The step is over: how many stops other threads wrote meanwhile (their answers are the caller's to read)."""
+        with self.wire:
+            owed, self.owed, self.stepper = self.owed, 0, None
+        return owed
+
+    def end_reading(self, terminators: Sequence[bytes], wait: float) -> int:
+        """:meth:`end`, then read the owed answers (a line each, ``wait`` s at most; none on a silent line). Best
+        effort: a stop not answered (firmware without it) leaves the line :attr:`Transport.silent`, to be
+        re-synchronised by the next command."""
+        owed = self.end()
+        for _ in range(owed):
+            if self.transport.silent:
+                break
+            try:
+                while not self.transport.read_until(terminators, timeout=wait).strip():
+                    pass  # the LF of a CRLF
+            except DeviceError as e:
+                log.debug("no answer to a stop sent from another thread: %s", e)
+                break
+        return owed
+
+    def send(self, data: bytes) -> bool:
+        """Write ``data`` (a stop) if another thread is stepping; whether it was (then nothing else is to be done)."""
+        with self.wire:
+            if self.stepper is None or self.stepper == threading.get_ident():
+                return False
+            try:
+                log.debug("-> %r on %s (from another thread, during a step)", data, self.transport.name)
+                self.transport.write(data)
+                self.owed += 1
+            except DeviceError as e:
+                log.warning("could not send %r to %s: %s", data, self.transport.name, e)
+            return True
+
+    def write(self, data: bytes) -> bytes:
+        """Write ``data``; the stale bytes discarded before it (none while a stop's answer is owed)."""
+        with self.wire:
+            stale = self.transport.drain() if not self.owed else b""
+            self.transport.write(data)
+        return stale
 
 
 def serial_port_name(path: str) -> str:

@@ -18,7 +18,8 @@ Commands are ASCII, terminated by ``;``, no newline::
     counterreset;       zero the counters
     version;            firmware identification
     stop;               stop all channels (newer firmware; sent only after a failed
-                        coarse command, best-effort)
+                        coarse command, best-effort, or by stop() from another thread
+                        during a step: its answer is then read by the stepping thread)
 
 Assumptions about replies (no public source documents the old firmware's replies;
 these follow the NanoControl's documented newer console, and are lenient):
@@ -67,8 +68,8 @@ import math
 import threading
 from collections.abc import Mapping
 
-from ..base import DeviceError, DeviceInfo, check_setting, check_steps
-from ..transport import Transport
+from ..base import DeviceError, DeviceInfo, StepsUncertain, check_setting, check_steps
+from ..transport import StopAside, Transport
 from ._common import DEFAULT_CHANNELS, log
 from ._common import check_channels as _check_channels
 from ._common import parse_reply as _parse_reply_text
@@ -170,7 +171,8 @@ class NanoControl:
         self._amp: dict[int, dict[str, int | None]] = {
             j: {"+": None, "-": None} for j in self.channels
         }
-        self._lock = threading.RLock()
+        self._lock = threading.RLock()  # one exchange at a time; a step() holds it throughout
+        self._aside = StopAside(transport)  # a stop from another thread during a step(): written, answer read by it
         self._busy = False
         self.version = ""
         if query_version and ack:
@@ -197,11 +199,10 @@ class NanoControl:
             if self.ack and self.transport.silent:  # a reply timed out: its answer may still come, put the line in step
                 queries = ((b"version;", self._is_version), (b"counterread;", self._is_counters))
                 self.transport.resync(queries, (b"\r", b"\n"), f"NanoControl on {self.transport.name}", wait)
-            stale = self.transport.drain()
+            log.debug("-> %s", wire.decode())
+            stale = self._aside.write(wire)
             if stale.strip(b"\r\n\t "):  # the LF of a CRLF answer is no news
                 log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
-            log.debug("-> %s", wire.decode())
-            self.transport.write(wire)
             if not self.ack:
                 return ""
             while True:
@@ -339,25 +340,31 @@ class NanoControl:
 
         Bursts longer than :data:`MAX_COARSE` are split. ``n = 0`` sends nothing.
         If the controller fails to answer or answers garbage, the joint is sent a stop
-        (best effort) and :class:`DeviceError` is raised.
+        (best effort) and :class:`DeviceError` is raised. After a :meth:`stop` from another
+        thread no further burst is sent and ``StepsUncertain`` is raised (the stopped
+        burst made between none and all of its steps).
         """
         ch = self._channel(joint)
         remaining = check_steps(n)
-        while remaining:
-            chunk = max(-MAX_COARSE, min(MAX_COARSE, remaining))
-            duration = abs(chunk) / self._hz[joint]
-            self._busy = True
+        made = 0
+        with self._lock:
+            self._aside.begin()
             try:
-                if self.ack:
-                    self.command(f"coarse {ch} {chunk:+d}", timeout=self.timeout + 1.5 * duration)
-                else:
-                    self.command(f"coarse {ch} {chunk:+d}")
-                    _sleep(duration)
-            except BaseException:  # a refused or unanswered burst, or Ctrl-C: stop the joint
-                self._send_stop()
-                raise
-            self._busy = False
-            remaining -= chunk
+                while remaining and not self._aside.owed:
+                    chunk = max(-MAX_COARSE, min(MAX_COARSE, remaining))
+                    _coarse(self, joint, ch, chunk)
+                    if self._aside.owed:
+                        raise StepsUncertain(
+                            f"NanoControl on {self.transport.name}: 'coarse {ch} {chunk:+d};' was stopped by stop() "
+                            "from another thread before it was answered: how many of its steps were made is not "
+                            "known", made, made + chunk)
+                    made += chunk
+                    remaining -= chunk
+            finally:
+                _end_step(self)
+            if remaining:
+                raise StepsUncertain(f"NanoControl on {self.transport.name}: {remaining:+d} steps on channel {ch} "
+                                     "were not sent: stop() was called from another thread", made, made)
 
     def stop(self, joint: int | None = None) -> None:
         """Stop all channels now (``stop;``: there is no per-channel stop). Never raises.
@@ -365,14 +372,16 @@ class NanoControl:
         A burst is over once the controller has answered it, so ``stop;`` is sent only
         while a burst may still be running (from another thread, or after a burst that
         failed or was interrupted); otherwise there is nothing to stop and nothing is sent.
+        From another thread during :meth:`step` it is written at once, its answer read by
+        the stepping thread (:class:`~stickslip.devices.transport.StopAside`).
         """
-        if self._busy or not self.ack:
+        if not self._aside.send(b"stop;") and (self._busy or not self.ack):
             self._send_stop()
 
     def _send_stop(self) -> None:
         try:
             log.debug("-> stop;")
-            self.transport.write(b"stop;")
+            self._aside.write(b"stop;")
             if self.ack:
                 try:
                     self.transport.read_available(quiet=0.02, limit=min(self.timeout, 0.2))
@@ -429,6 +438,31 @@ class NanoControl:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _coarse(dev: NanoControl, joint: int, ch: str, chunk: int) -> None:
+    """One ``coarse`` burst of :meth:`NanoControl.step`; on a failure or Ctrl-C the joint is sent a stop."""
+    duration = abs(chunk) / dev._hz[joint]
+    dev._busy = True
+    try:
+        if dev.ack:
+            dev.command(f"coarse {ch} {chunk:+d}", timeout=dev.timeout + 1.5 * duration)
+        else:
+            dev.command(f"coarse {ch} {chunk:+d}")
+            _sleep(duration)
+    except BaseException:  # a refused or unanswered burst, or Ctrl-C: stop the joint
+        _end_step(dev)
+        dev._send_stop()
+        raise
+    dev._busy = False
+
+
+def _end_step(dev: NanoControl) -> None:
+    """Leave :meth:`NanoControl.step`: read the answers to the stops another thread wrote meanwhile (best effort)."""
+    if dev.ack:
+        dev._aside.end_reading((b"\r", b"\n"), min(dev.timeout, 0.2))
+    else:
+        dev._aside.end()
 
 
 def _sleep(seconds: float) -> None:
