@@ -322,3 +322,42 @@ def test_a_stop_from_another_thread_during_stepw_leaves_the_burst_uncertain_and_
     assert (result.made, result.at_most) == (0, 100)  # the true 40 inside
     assert dev.voltage(1) == 30.0  # the next command reads its own answer: both OKs were read, no more
     assert t.expected == []
+
+
+def test_close_from_another_thread_during_stepw_grounds_after_the_step_has_read_its_answers():
+    # close() stops (written at once, as stop() from another thread) and grounds: the grounding's exchange waits for
+    # the stepping thread to read stepw's and the stop's answers, so it reads its own, and the line closes after
+    import threading
+
+    from held_console import HeldConsole
+
+    from stickslip.devices.base import StepsUncertain
+
+    t = HeldConsole([*LOGIN, *_lines(
+        ("setm 1 stp", "OK\r\n"),
+        ("getf 1", "frequency = 1000 Hz\r\nOK\r\n"),
+        ("stepu 1 100", "OK\r\n"),
+        ("stepw 1", None),
+        ("stop 1", "OK\r\nOK\r\n"),
+        ("setm 1 gnd", "ERROR\r\n"),  # told apart from the OKs: read by the thread that asked, the grounding fails
+    )], name="fake:7230")
+    dev = ANC300(t, password=PASSWORD, timeout=5.0, query_delay=0.0, axes={1: 1})
+    outcome: list[object] = []
+
+    def stepping():
+        try:
+            dev.step(1, 100)
+            outcome.append(100)
+        except Exception as e:  # noqa: BLE001
+            outcome.append(e)
+
+    worker = threading.Thread(target=stepping, daemon=True)
+    worker.start()
+    assert t.held_sent.wait(5.0)
+    dev.close()
+    worker.join(10.0)
+    assert not worker.is_alive()
+    (result,) = outcome
+    assert isinstance(result, StepsUncertain), result
+    assert (result.made, result.at_most) == (0, 100)
+    assert t.expected == [] and t.closed

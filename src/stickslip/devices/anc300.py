@@ -470,23 +470,31 @@ class ANC300:
         }
 
     def close(self) -> None:
-        """Stop every axis, ground it (mode ``gnd``), and release the transport."""
+        """Stop every axis, ground it (mode ``gnd``), and release the transport.
+
+        From another thread during :meth:`step`, the stops go out at once and the rest
+        waits for that step to end (it reads the answers it is owed first).
+        """
         if self.transport.closed:
             return
         try:
             self.stop()
-            if getattr(self.transport, "silent", False):  # not answering: ground every axis, waiting for no answer
-                self._send_unanswered([f"setm {self._axis(j).id} gnd" for j in sorted(self.axes)])
-                return
-            for j in sorted(self.axes):
-                ax = self._axis(j)
-                try:
-                    with self._read_timeout(min(self.timeout, 0.5)):
-                        ax.mode = "gnd"
-                except Exception as e:  # noqa: BLE001
-                    log.warning("could not ground axis %s: %s", ax.id, e)
+            with self._io:
+                self._ground()
         finally:
             self.transport.close()
+
+    def _ground(self) -> None:
+        if getattr(self.transport, "silent", False):  # not answering: ground every axis, waiting for no answer
+            self._send_unanswered([f"setm {self._axis(j).id} gnd" for j in sorted(self.axes)])
+            return
+        for j in sorted(self.axes):
+            ax = self._axis(j)
+            try:
+                with self._read_timeout(min(self.timeout, 0.5)):
+                    ax.mode = "gnd"
+            except Exception as e:  # noqa: BLE001
+                log.warning("could not ground axis %s: %s", ax.id, e)
 
     def __enter__(self) -> ANC300:
         return self
