@@ -559,3 +559,54 @@ def test_a_long_timeout_caps_the_go_interval_at_65535_ms() -> None:
     dev = NanoControlConsole(t, timeout=30, margin=MARGIN, clock=clock, sleep=clock.sleep)
     with t:
         dev.step(3, 6400)
+
+
+class _Watched:
+    """A lock that says when a thread waits for it (``waiting``), as a step() about to begin does."""
+
+    def __init__(self) -> None:
+        import threading
+
+        self.lock = threading.RLock()
+        self.waiting = threading.Event()
+
+    def acquire(self, blocking: bool = True, timeout: float = -1) -> bool:
+        if blocking:
+            self.waiting.set()
+        return self.lock.acquire(blocking, timeout)
+
+    def release(self) -> None:
+        self.lock.release()
+
+    def __enter__(self) -> _Watched:
+        self.acquire()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def test_a_stop_from_another_thread_as_a_step_begins_is_not_held_back_until_the_step_is_over() -> None:
+    # stop() saw neither a burst driving nor a step under way (the step waited for the line) and queued its own
+    # 'stop' behind the line's lock: it went out only after the whole step, whose bursts it did not stop
+    import threading
+
+    t, dev, _ = console([FREQ])  # the step begins (frequency), then sends no go: it was stopped
+    watched = _Watched()
+    dev._lock = watched  # type: ignore[assignment]
+    watched.lock.acquire()  # the line busy (an exchange of a third thread) as the step begins
+    outcome: list[object] = []
+    worker = threading.Thread(target=lambda: outcome.append(dev.step(3, 100)), daemon=True)
+    worker.start()
+    try:
+        assert watched.waiting.wait(5.0)  # the step waits for the line
+        stopper = threading.Thread(target=dev.stop, daemon=True)
+        stopper.start()
+        stopper.join(5.0)
+        assert not stopper.is_alive()  # the stop returned at once, not behind the step
+    finally:
+        watched.lock.release()
+    worker.join(5.0)
+    assert not worker.is_alive() and outcome == [None]
+    assert not any(m.startswith(b"go") for m in t.sent)  # no burst after the stop
+    t.assert_done()

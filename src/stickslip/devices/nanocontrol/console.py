@@ -376,7 +376,8 @@ class NanoControlConsole(SpeedProfiles):
 
         During a ``step()`` (from another thread) it sends ``stopnack`` at once if a
         channel is driving, and the ``step()`` ends early, sending ``stop`` itself;
-        otherwise it sends ``stop``.
+        while another thread has the line (a ``step()`` about to begin) that step sends
+        no burst; otherwise it sends ``stop``.
         """
         if self._driving or self._in_step:
             self._halt = True
@@ -386,10 +387,15 @@ class NanoControlConsole(SpeedProfiles):
                 except DeviceError as e:
                     log.warning("could not send stopnack to %s: %s", self.transport.name, e)
             return
+        if not self._lock.acquire(blocking=False):  # another thread has the line: a step about to begin sends no go
+            self._halt = True
+            return
         try:
             self.command("stop", sync=False)
         except DeviceError as e:
             log.warning("stop: %s", e)
+        finally:
+            self._lock.release()
 
     # -- protocol -----------------------------------------------------------------------
     @property
