@@ -43,7 +43,7 @@ from ophyd_async.core import init_devices  # noqa: E402
 from stickslip import kinematics as kin  # noqa: E402
 from stickslip.bluesky import MoveError, StickSlipAxis, StickSlipManipulator, calibration_day  # noqa: E402
 from stickslip.calibration import Calibration  # noqa: E402
-from stickslip.devices.base import DeviceError, DeviceInfo  # noqa: E402
+from stickslip.devices.base import DeviceError, DeviceInfo, StepsUncertain  # noqa: E402
 from stickslip.devices.positions import load_state  # noqa: E402
 from stickslip.motion.planning import Planner  # noqa: E402
 from stickslip.sim.arm import SimulatedMM3A  # noqa: E402
@@ -232,6 +232,43 @@ class PacedArm:
 
     def close(self) -> None:
         self.sim.close()
+
+
+class RaisingPacedArm(PacedArm):
+    """A paced controller whose burst cut short by stop() raises what it knows, as the ANC300 and the legacy
+    NanoControl do since thread62: StepsUncertain(0, n), not a quiet early return."""
+
+    def step(self, joint: int, n: int) -> None:
+        super().step(joint, n)
+        if self.halt.is_set():
+            raise StepsUncertain(f"sim: a burst of {n:+d} steps was stopped", 0, n)
+
+
+def test_a_stop_the_driver_reports_as_an_uncertain_burst_is_a_stop_not_a_failure(sim: SimulatedMM3A) -> None:
+    """A driver that raises StepsUncertain for a burst our stop() cut short (thread62) made a Bluesky move end as
+    a failed MoveError ('... steps confirmed ...') instead of 'was stopped'; the position was honest either way."""
+    cal = true_calibration(sim)
+    arm = RaisingPacedArm(sim)
+
+    async def scenario() -> Exception | None:
+        axis = StickSlipAxis(arm, 3, cal, name="q3", burst=1000)
+        await axis.connect()
+        status = axis.set(5e-3)
+        await asyncio.sleep(0.3)
+        await axis.stop()
+        try:
+            await status
+        except Exception as e:  # noqa: BLE001 - the status's error is what is checked
+            return e
+        return None
+
+    error = asyncio.run(scenario())
+    assert isinstance(error, RuntimeError) and not isinstance(error, MoveError) and "was stopped" in str(error), error
+    assert 0.0 < sim.position(3) < 5e-3
+    with Store.open() as store:
+        state = load_state(store, "sim://")
+    lo, hi = state.uncertain[3]
+    assert lo - 0.005 * hi <= sim.position(3) <= hi + 0.005 * hi
 
 
 def test_stop_during_a_long_move_cuts_the_burst_and_leaves_an_honest_position(sim: SimulatedMM3A) -> None:
