@@ -614,11 +614,9 @@ class StickSlipAxis(StandardReadable, Locatable[float], Stoppable, Checkable[flo
                 return _MoveResult(plan.steps, proxy.sent, True, state)
             settle(state, plan, outcome)
             save(state)
-            if outcome.error is not None and self._stop_event.is_set():  # the driver cut the burst for our stop and
-                return _MoveResult(plan.steps, outcome.sent, True, state)  # said how far (an ANC300, a NanoControl)
-            if outcome.error is not None:
+            if outcome.error is not None and not self._stop_event.is_set():  # set: our stop, cut by the driver
                 raise MoveError(failure_text(state, joint, outcome.error, outcome.sent, plan.steps))
-            return _MoveResult(plan.steps, outcome.sent, False, state)
+            return _MoveResult(plan.steps, outcome.sent, outcome.error is not None, state)
 
     def _move_seen(
         self, target: float, publish: Callable[[DeviceState], None], cal: Calibration, camera: CameraLoop
