@@ -221,3 +221,41 @@ def test_an_emulator_served_from_the_command_line_stops_cleanly_on_sigterm(kind:
         proc.kill()
     assert proc.returncode == 0, err
     assert "commands received; steps {0: 0, 1: 10, 2: 0" in out
+
+
+class _StopOnEnter:
+    """The step lock, with a stop() from 'another thread' arriving just after step() has taken it: the moment the
+    halt flag used to be cleared (thread62's note 3), made deterministic by calling stop() from inside."""
+
+    def __init__(self, dev: object) -> None:
+        self._lock, self._dev = threading.Lock(), dev
+
+    def locked(self) -> bool:
+        return self._lock.locked()
+
+    def __enter__(self) -> None:
+        self._lock.acquire()
+        self._dev.stop()  # type: ignore[attr-defined]
+
+    def __exit__(self, *exc: object) -> None:
+        self._lock.release()
+
+
+@pytest.mark.parametrize("emulator", [MCSEmulator, MCS2Emulator])
+def test_a_stop_just_after_a_step_took_its_lock_stops_that_step(emulator: type) -> None:
+    """step() cleared the halt flag after taking its lock, so a stop() that came in between was erased and the
+    burst ran in full (the channel's stop had gone out before the burst started). Now the halt is set for any
+    step() begun and cleared only before one begins: the step sends no burst and says so, no step made."""
+    sim = _sim(seed=5)
+    with emulator(sim) as emu:
+        with open_device(emu.url + "?hz=5000") as dev:
+            _no_waiting(dev)
+            before = sim.position(3)
+            dev._step_lock = _StopOnEnter(dev)  # type: ignore[attr-defined]
+            with pytest.raises(StepsUncertain) as e:
+                dev.step(3, 200)
+            assert (e.value.made, e.value.at_most) == (0, 0) and "stop() was called" in str(e.value)
+            assert sim.position(3) == before  # was: 200 steps made
+            dev._step_lock = threading.Lock()  # type: ignore[attr-defined]
+            dev.step(3, 10)  # a stop before a step began does not stop the next one
+    assert sim.position(3) != before

@@ -193,6 +193,8 @@ class SmarActBase:
         self._amplitude = dict.fromkeys(self.channel_map.channels, a)
         self._lock = threading.RLock()  # one exchange (command and answer) at a time
         self._step_lock = threading.Lock()  # one step() at a time
+        self._state_lock = threading.Lock()  # _halt and _stepping, read and written together
+        self._stepping = 0  # step() calls begun and not yet ended (one runs, others wait for _step_lock)
         self._halt = False  # stop() was called while a step() runs
         self._running: int | None = None  # channel a burst was started on and not confirmed ended
         self.version = ""
@@ -286,14 +288,21 @@ class SmarActBase:
         n = check_steps(n)
         if n == 0:
             return
-        with self._step_lock:
-            self._halt = False
-            made = 0
-            while made != n:
-                left = n - made
-                k = max(-self.MAX_STEPS, min(self.MAX_STEPS, left))
-                self._burst(int(joint), channel, sign, k, made)
-                made += k
+        with self._state_lock:  # a stop() from now on stops this step: the halt is never cleared after it is set
+            if not self._stepping:
+                self._halt = False
+            self._stepping += 1
+        try:
+            with self._step_lock:
+                made = 0
+                while made != n:
+                    left = n - made
+                    k = max(-self.MAX_STEPS, min(self.MAX_STEPS, left))
+                    self._burst(int(joint), channel, sign, k, made)
+                    made += k
+        finally:
+            with self._state_lock:
+                self._stepping -= 1
 
     def _burst(self, joint: int, channel: int, sign: int, k: int, made: int) -> None:
         hz, amplitude = self._hz[joint], self._amplitude[joint]
@@ -374,8 +383,9 @@ class SmarActBase:
         except ValueError as e:
             log.warning("stop: %s", e)
             return
-        if self._step_lock.locked():
-            self._halt = True
+        with self._state_lock:  # a step() begun (running, or waiting for the line) sends no further burst
+            if self._stepping:
+                self._halt = True
         for channel in targets:
             if not self._stop_channel(channel):
                 log.warning("%s: the stop of channel %d was not acknowledged", self._where(), channel)
