@@ -71,7 +71,7 @@ from .base import (
     secret_from_env,
     url_options,
 )
-from .transport import SerialTransport, SocketTransport, Transport, serial_port_name, windows_com_port
+from .transport import SerialTransport, SocketTransport, StopAside, Transport, serial_port_name, windows_com_port
 
 PASSWORD_ENV = "STICKSLIP_ANC300_PASSWORD"
 """Environment variable holding the ANC300 console password."""
@@ -133,8 +133,7 @@ def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:
             self.connection = transport
             self.read_timeout = timeout
             self.sync_answer: str | None = None
-            self.write_lock = threading.Lock()  # a stop from another thread writes while a burst's answer is awaited
-            self.owed = 0  # answers to stops written by another thread, for the stepping thread to read
+            self.aside = StopAside(transport)  # a stop from another thread during a step(): written, answer read by it
 
         def _write(self, command: str, **kwargs: Any) -> None:
             self._write_bytes((command + "\r\n").encode("ascii"))
@@ -146,11 +145,9 @@ def TransportAdapter(transport: Transport, timeout: float | None = None) -> Any:
                 where = f"ANC300 on {self.transport.name}"
                 self.transport.resync([(b"ver\r\n", _version_then_ok(self.sync_answer))], b"\r\n", where,
                                       self.read_timeout)
-            with self.write_lock:  # with owed stop answers unread nothing is stale: the stepping thread reads them
-                stale = self.transport.drain() if not self.owed else b""
-                if stale.strip(b"\r\n\t "):
-                    log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
-                self.transport.write(content)
+            stale = self.aside.write(content)  # none while a stop's answer is owed: the stepping thread reads it
+            if stale.strip(b"\r\n\t "):
+                log.warning("discarding unexpected bytes from %s: %r", self.transport.name, stale)
 
         def _read(self, **kwargs: Any) -> str:
             raw = self.transport.read_until(b"\r\n", timeout=self.read_timeout)
@@ -252,7 +249,6 @@ class ANC300:
             msg = str(e).replace(password, "***") if password else str(e)
             raise DeviceError(f"ANC300 on {transport.name}: {msg}{_login_advice(msg)}") from None
         self._io = threading.RLock()  # one exchange (command and answer) at a time; a step() holds it throughout
-        self._stepper: int | None = None  # the thread in step(): it alone reads the line then
         self._mode: dict[int, str | None] = dict.fromkeys(self.axes)
         self._hz: dict[int, float | None] = dict.fromkeys(self.axes)
         self._volt: dict[int, float | None] = dict.fromkeys(self.axes)
@@ -347,7 +343,7 @@ class ANC300:
         if n == 0:
             return
         with self._io:
-            self._stepper = threading.get_ident()
+            self.adapter.aside.begin()  # this thread alone reads the line until _end_step
             try:
                 sent = self._burst(ax, joint, n)
             except BaseException:  # refused, unanswered, garbage, or Ctrl-C: stop the axis
@@ -367,12 +363,12 @@ class ANC300:
             self._device(lambda: setattr(ax, "mode", "stp"), f"setm {ax.id} stp")
             self._mode[int(joint)] = "stp"
         hz = self.frequency(joint)
-        if self.adapter.owed:
+        if self.adapter.aside.owed:
             return False
         cmd = f"stepu {ax.id} {n}" if n > 0 else f"stepd {ax.id} {-n}"
         assert n != 0  # never "stepu X 0": that is a continuous move
         self._device(lambda: ax.move_raw(n), cmd)
-        if self.adapter.owed:
+        if self.adapter.aside.owed:
             return True
         with self._read_timeout(self.timeout + 1.5 * abs(n) / hz):
             self._device(lambda: ax.ask("stepw"), f"stepw {ax.id}")
@@ -380,10 +376,7 @@ class ANC300:
 
     def _end_step(self) -> int:
         """Leave :meth:`step`: read the answers to the stops another thread wrote meanwhile; how many it wrote."""
-        with self.adapter.write_lock:
-            owed = int(self.adapter.owed)
-            self.adapter.owed = 0
-            self._stepper = None
+        owed = int(self.adapter.aside.end())
         for _ in range(owed):
             if self.transport.silent:  # the console stopped answering: the next command re-synchronises the line
                 break
@@ -413,24 +406,10 @@ class ANC300:
         answer is taken for another command's); that ``step()`` raises ``StepsUncertain``.
         """
         joints = sorted(self.axes) if joint is None else [int(joint)]
-        if self._stop_aside([f"stop {self._axis(j).id}" for j in joints]):
+        if self.adapter.aside.send(*(f"stop {self._axis(j).id}\r\n".encode("ascii") for j in joints)):
             return
         with self._io:
             self._stop_here(joints)
-
-    def _stop_aside(self, commands: Sequence[str]) -> bool:
-        """During a step() in another thread, write ``commands`` at once and leave their answers to it; whether so."""
-        with self.adapter.write_lock:
-            if self._stepper is None or self._stepper == threading.get_ident():
-                return False
-            for command in commands:
-                try:
-                    self.transport.write((command + "\r\n").encode("ascii"))
-                except Exception as e:  # noqa: BLE001 - best effort
-                    log.warning("could not send %r to %s: %s", command, self.transport.name, e)
-                    break
-                self.adapter.owed += 1
-        return True
 
     def _stop_here(self, joints: Sequence[int]) -> None:
         if getattr(self.transport, "silent", False):

@@ -252,17 +252,21 @@ class StopAside:
                 break
         return owed
 
-    def send(self, data: bytes) -> bool:
-        """Write ``data`` (a stop) if another thread is stepping; whether it was (then nothing else is to be done)."""
+    def send(self, *messages: bytes) -> bool:
+        """Write ``messages`` (stops, each answered once) if another thread is stepping; whether it was (then
+        nothing else is to be done). All are written under one hold of the line, so the step cannot end between
+        them; a failed write ends them (best effort)."""
         with self.wire:
             if self.stepper is None or self.stepper == threading.get_ident():
                 return False
-            try:
-                log.debug("-> %r on %s (from another thread, during a step)", data, self.transport.name)
-                self.transport.write(data)
-                self.owed += 1
-            except DeviceError as e:
-                log.warning("could not send %r to %s: %s", data, self.transport.name, e)
+            for data in messages:
+                try:
+                    log.debug("-> %r on %s (from another thread, during a step)", data, self.transport.name)
+                    self.transport.write(data)
+                    self.owed += 1
+                except DeviceError as e:
+                    log.warning("could not send %r to %s: %s", data, self.transport.name, e)
+                    break
             return True
 
     def write(self, data: bytes) -> bytes:
