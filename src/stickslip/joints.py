@@ -36,6 +36,7 @@ __all__ = [
     "TILT_LIMIT",
     "JointSet",
     "JointSpec",
+    "coordinate_bound",
     "coordinate_problem",
     "joint_spec",
     "tilt_problem",
@@ -243,6 +244,13 @@ def _shown(q: object) -> str:
     return text if len(text) <= 40 else f"{text[:20]}...({len(text)} characters)"
 
 
+def coordinate_bound(joint: int) -> float:
+    """No arm's coordinate of joint ``joint`` lies beyond ``±`` this, whatever the arm: :data:`MAX_STROKE` (m) for
+    joint 3, prismatic on every arm; :data:`MAX_TURN` (rad) for joints 1 and 2 (a stage's are prismatic, within a
+    metre: within a turn too)."""
+    return MAX_STROKE if joint == 3 else MAX_TURN
+
+
 def coordinate_problem(name: str, joint: int, q: float) -> str | None:
     """Why ``q`` can be no arm's coordinate of joint ``joint`` (1, 2, 3), whatever the arm; ``None`` if it can.
 
@@ -256,7 +264,7 @@ def coordinate_problem(name: str, joint: int, q: float) -> str | None:
     if v is None:
         return f"{name} must be a finite number in SI units, got {_shown(q)}"
     rotary = joint != 3
-    bound = MAX_TURN if rotary else MAX_STROKE
+    bound = coordinate_bound(joint)
     if abs(v) <= bound:
         return None
     slip = _slip(v, rotary, lambda r: abs(r) <= bound)

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .. import kinematics as kin
-from ..joints import MAX_STROKE, MAX_TURN
+from ..joints import coordinate_bound
 from .rows import _TILT_LIMIT
 
 CHUNK_ROWS = 65536
@@ -67,7 +67,7 @@ def _pose_ok(joint: NDArray[np.int64], nums: dict[str, NDArray[np.float64]]) -> 
     ok = np.ones(joint.size, dtype=bool)
     for j in (1, 2, 3):  # the moving joint's own q is ignored, but within a turn (a metre): the store refuses it else
         q = nums[f"q{j}"]
-        ok &= ((joint == j) & (np.abs(q) <= (MAX_STROKE if j == 3 else MAX_TURN))) | _within(j, q)
+        ok &= ((joint == j) & (np.abs(q) <= coordinate_bound(j))) | _within(j, q)
     for name in ("theta", "psi"):
         v = nums[name]
         ok &= (-_TILT_LIMIT <= v) & (v <= _TILT_LIMIT)

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .. import kinematics as kin
-from ..joints import MAX_STROKE, MAX_TURN, TILT_LIMIT, coordinate_problem, tilt_problem
+from ..joints import TILT_LIMIT, coordinate_bound, coordinate_problem, tilt_problem
 
 FloatArray = NDArray[np.float64]
 
@@ -375,7 +375,7 @@ def _check_pose_arrays(what: str, values: dict[str, ArrayLike], joint: int = 0) 
     ``ValueError`` naming the first such value and its likely unit slip (``q2 = -90``, degrees, gave a step)."""
     for name, v in values.items():
         j = joint if name in ("start", "end") else _POSE_JOINT[name]
-        bound = TILT_LIMIT if j == 0 else (MAX_STROKE if j == 3 else MAX_TURN)
+        bound = TILT_LIMIT if j == 0 else coordinate_bound(j)
         if type(v) is float and -bound <= v <= bound:  # a scalar within: no array made (nan is not)
             continue
         a = np.asarray(v, dtype=float)
