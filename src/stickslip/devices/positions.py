@@ -67,7 +67,12 @@ class UnreadableState(ValueError):
     """The kept positions of a device cannot be read (not JSON, an entry of the wrong type, a tilt outside
     [-pi, pi]: a hand edit, a bad sector, an older release's checks). Recording positions anew
     (``stickslip where --set``) replaces them; a record of a newer release is a plain ``ValueError``, never
-    replaced."""
+    replaced. ``what``: what cannot be read, without the way out the message adds."""
+
+    def __init__(self, what: str) -> None:
+        super().__init__(f"{what}; record them anew with `stickslip where --set J=VALUE` for this device (the joints "
+                         "not set are then unreferenced)")
+        self.what = what
 
 
 SOURCES = ("default", "set", "dead-reckoned", "observed", "seen", "assumed")
@@ -295,18 +300,16 @@ def load_state(store: StateStore, device: str, joints: JointSet | None = None) -
     raw = store.get_state(device, _KEY)
     if not raw:
         return state
-    way_out = ("; record them anew with `stickslip where --set J=VALUE` for this device (the joints not set are "
-               "then unreferenced)")
     if isinstance(raw, str):
         try:
             raw = loads_json(raw, f"the stored positions of {device}")
         except ValueError as e:
-            raise UnreadableState(f"{e}{way_out}") from None
+            raise UnreadableState(str(e)) from None
     check_version(raw, f"the stored positions of {device}", "device state", STATE_VERSION)
     try:
         _read_state(state, raw)
     except (TypeError, ValueError, AttributeError, OverflowError) as e:
-        raise UnreadableState(f"the stored positions of {device} are unreadable: {e}{way_out}") from None
+        raise UnreadableState(f"the stored positions of {device} are unreadable: {e}") from None
     return state
 
 

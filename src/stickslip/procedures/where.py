@@ -56,7 +56,8 @@ class ListsDevices(Protocol):
 def also_kept(store: object, key: str) -> tuple[str, ...]:
     """The other keys of ``key``'s controller (:func:`~stickslip.devices.base.controller_of`: its default port
     written out or left off, a ``/`` after the host) under which ``store`` keeps positions; ``()`` for a store
-    that lists no devices. Each key has positions and a lock of its own: a move made under one is not in the other.
+    that lists no devices. Each key has positions of its own (they share one lock: :func:`~stickslip.storage.
+    schema.lock_name`): a move made under one is not in the other.
     """
     if not isinstance(store, ListsDevices) or "#" in key:
         return ()
@@ -82,8 +83,8 @@ def also_kept_warning(key: str, others: Sequence[str]) -> str:
     """The line that says ``key``'s controller has positions kept under ``others`` too (:func:`also_kept`)."""
     return (
         f"positions of this controller are also kept under {', '.join(others)}, the same controller written "
-        f"another way (its default port, or a / after the host): each spelling keeps positions and a lock of its "
-        f"own, so a move made under one is not in the other; write the URL one way ({key} here) and reference "
+        f"another way (its default port, or a / after the host): each spelling keeps positions of its own, so a "
+        f"move made under one is not in the other; write the URL one way ({key} here) and reference "
         "the joints again under it (docs/storage.md)"
     )
 
@@ -245,7 +246,7 @@ def where(
         except UnreadableState as e:  # no command could read them: recording positions anew is the way out
             if not records:
                 raise
-            state, replaced = DeviceState.default(key, joints), str(e).split("; record them anew")[0]
+            state, replaced = DeviceState.default(key, joints), e.what
         changed = pose.apply(state)
         for i, (joint, q) in enumerate(references):
             try:
