@@ -255,7 +255,8 @@ def test_stop_from_another_thread_ends_a_burst_early_and_leaves_nothing_driving(
             timer = threading.Timer(0.5, dev.stop)
             timer.start()
             t0 = time.monotonic()
-            dev.step(3, 6400)  # returns early: asked to stop
+            with pytest.raises(StepsUncertain, match="stopped by stop") as e:  # early, and says by how much
+                dev.step(3, 6400)
             elapsed = time.monotonic() - t0
             timer.join()
         assert emu.driving == []
@@ -263,5 +264,6 @@ def test_stop_from_another_thread_ends_a_burst_early_and_leaves_nothing_driving(
         received = list(emu.received)
     assert elapsed < 3.0
     assert 0 < made < 6400  # about 0.5 s x 1000 Hz
+    assert e.value.at_most is not None and e.value.made <= made <= e.value.at_most  # the bound holds what was made
     go = next(i for i, m in enumerate(received) if m.startswith("go"))
     assert received[go + 1 : go + 3] == ["stopnack", "stop"]

@@ -263,6 +263,8 @@ class NanoControlConsole(SpeedProfiles):
             If a burst fails (an ``e`` answer, no answer, garbage, a late or unanswered
             ``stop``): ``made`` steps of earlier bursts are certain, the rest bounded.
             A stop (``stopnack``, then ``stop``) has been sent where the line works.
+            Also after :meth:`stop` from another thread: the stopped burst made between none
+            and all of its steps, and no later burst is sent (as every other driver does).
         DeviceError
             If the user's speed profile could not be read on opening (nothing is sent).
         """
@@ -301,6 +303,10 @@ class NanoControlConsole(SpeedProfiles):
             finally:
                 self._in_step = False
                 self._restore_quietly()
+            if made != n:  # stop() from another thread before a burst: the rest was not sent
+                raise StepsUncertain(
+                    f"NanoControl on {self.transport.name}: {n - made:+d} steps on channel {ch} were not sent: "
+                    "stop() was called from another thread", made, made)
 
     def _part(self, ch: str, count: int, m: int, made: int) -> None:
         """One ``go``: ``count x |m|`` steps in the sign of ``m``, stopped on time or raising."""
@@ -351,8 +357,10 @@ class NanoControlConsole(SpeedProfiles):
             ) from None
         t_stopped = self._clock()
         self._driving = False
-        if self._halt:
-            return  # stopped early by stop() from another thread, as asked
+        if self._halt:  # stopped early by stop() from another thread, as asked: how far it went is not known
+            raise StepsUncertain(
+                f"NanoControl on {self.transport.name}: {go!r} was stopped by stop() from another thread: "
+                f"between none and all of its {steps} steps were made", made, made + sign * steps)
         late = t_stopped - t_sent
         if late >= t_ms / 1000.0:
             intervals = math.ceil(late / (t_ms / 1000.0))
