@@ -89,7 +89,7 @@ def test_the_upgrade_to_5_makes_the_spellings_one_device_and_never_keeps_a_disag
             assert st.count_traverses(spelling) == 7, spelling  # nothing deleted: 3 + 3 + 1
         state = load_state(st, "anc300://h/")
         assert state.uncertain == {3: (JOINTS[3].lower, JOINTS[3].upper)}  # kept apart: its whole range
-        assert "anc300://h and anc300://h:7230, one controller, kept it apart" in state.why[3]
+        assert "anc300://h and anc300://h:7230, one controller, kept two positions of it" in state.why[3]
         assert state.positions[1] == 0.25 and state.referenced(1) and state.referenced(2) is False
         assert state.claim == {3: (0.001, 0.003)}  # the span both claims cover
         assert state.theta == 0.2  # the tilt written last

@@ -270,7 +270,8 @@ def test_a_process_that_finds_the_upgrade_made_by_another_says_nothing_of_one(tm
 def test_a_stored_name_is_its_own_stored_name_so_the_upgrade_never_collides(tmp_path):
     """'anc300://h ?password=x' was stored as 'anc300://h ' (its host ending in a space), whose own name is
     'anc300://h' (now 'anc300://h:7230', its controller's); a schema-3 store holding both spellings could not be
-    upgraded ('UNIQUE constraint failed: devices.url'), so no command opened it (audit56, found by a hypothesis search over 20 000 URLs)."""
+    upgraded ('UNIQUE constraint failed: devices.url'), so no command opened it (audit56, found by a hypothesis
+    search over 20 000 URLs)."""
     from hypothesis import HealthCheck, given, settings
     from hypothesis import strategies as st
 

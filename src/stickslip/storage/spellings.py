@@ -102,8 +102,8 @@ def _merge_positions(con: Backend, dst: int, held: dict[str, tuple[str, str]], t
                     f"anew (`stickslip where -d {key} --set ...`)"]
     newer, older = (b, a) if b and theirs[1] > mine[1] else (a, b)
     merged, apart = merge_positions(newer, older, "#" in key,
-                                    f"{redact_url(url)} and {was}, one controller, kept it apart before the "
-                                    "upgrade to schema 5")
+                                    f"{redact_url(url)} and {was}, one controller, kept two positions of it "
+                                    "before the upgrade to schema 5")
     _set(con, dst, held, POSITIONS, json.dumps(merged), max(mine[1], theirs[1]))
     said = []
     if apart:
@@ -136,9 +136,12 @@ def merge_positions(newer: dict[str, Any], older: dict[str, Any], arm: bool, why
     the joints they kept apart (now uncertain: ``why``).
 
     ``newer`` is kept, but for a joint whose position or uncertain bounds differ: uncertain over its whole
-    range, which a merge cannot know for an arm of a rig file (``arm``, or a value beyond the MM3A's stops):
-    its bounds are then every arm's coordinate bound, and reading them (``devices.positions.load_state``)
-    makes the joint uncertain over its own arm's range. Claims: per joint, the span of both.
+    range. The store does not know an arm's joints: the MM3A's range is taken (an arm opened by its URL alone),
+    unless the key names a rig arm (``arm``) or a kept value lies beyond the MM3A's stops; then the bounds are
+    every arm's coordinate bound, which reading them (``devices.positions.load_state``) turns into the arm's
+    own whole range. (A rig file's only arm, kept under the bare key, with a joint wider than the MM3A's and
+    values inside the MM3A's range, gets the MM3A's range: uncertain, refused until referenced, but its bounds
+    narrower than its stops.) Claims: per joint, the span of both.
     """
     merged = json.loads(json.dumps(newer))
     apart = []
