@@ -976,33 +976,36 @@ def test_default_ports_are_the_ports_the_drivers_open():
 
 
 @pytest.mark.parametrize("other", ["anc300://labnano:7230", "anc300://LABNANO/", "anc300://labnano:7230/"])
-def test_where_warns_of_positions_kept_under_another_spelling_of_the_controller(tmp_path, other):
-    """anc300://labnano and anc300://labnano:7230 are one ANC300 with two kept positions (and one lock): a move made
-    under one is not in the other's positions, which still show 'set' or 'dead-reckoned' (audit57)."""
+def test_one_controller_written_two_ways_keeps_one_position(tmp_path, other):
+    """anc300://labnano and anc300://labnano:7230 were one ANC300 with two kept positions (and one lock): a move
+    made under one was not in the other's positions, which still showed 'set' (audit57; `where` only warned).
+    Now (schema 5) every spelling is the controller's one device: a reference under one is where another sees."""
     db = tmp_path / "s.db"
     assert run("where", "-d", "anc300://labnano", "--db", db, "--offline", "--set", "3=min").exit_code == 0
     r = run("where", "-d", other, "--db", db, "--offline")
-    assert r.exit_code == 0, r.output
-    warned = [ln for ln in r.stderr.splitlines() if ln.startswith("warning:")]
-    assert len(warned) == 1, r.stderr
-    assert "also kept under anc300://labnano, the same controller written another way" in warned[0]
-    assert _where(db, other)["also_kept"] == ["anc300://labnano"]
-    alone = run("where", "-d", "anc300://labnano", "--db", db, "--offline")  # the other has no positions kept
-    assert alone.exit_code == 0 and "warning" not in alone.stderr, alone.stderr
-    assert _where(db, "anc300://labnano")["also_kept"] == []
-    assert _where(db, "anc300://otherhost:7230")["also_kept"] == []
+    assert r.exit_code == 0 and "warning" not in r.stderr, r.output
+    w = _where(db, other)
+    assert w["device"] == "anc300://labnano:7230" and "also_kept" not in w
+    assert w["joints"][2]["source"] == "set" and w["joints"][2]["q"] == _where(db, "anc300://labnano")["joints"][2]["q"]
+    assert _where(db, "anc300://otherhost:7230")["joints"][2]["source"] == "default"  # another controller
 
 
-def test_move_warns_of_positions_kept_under_another_spelling_of_the_controller(tmp_path, faulty, monkeypatch):
+def test_a_move_through_one_spelling_is_where_another_spelling_sees(tmp_path, cal_path, faulty, monkeypatch):
+    """A move through faulty://arm:4000 left faulty://arm's kept position where the arm no longer was, and a move
+    through faulty://arm then planned from it (audit57). Now both spellings keep one position: the moved one."""
     from stickslip.devices import base
 
     monkeypatch.setitem(base.DEFAULT_PORTS, "faulty", 4000)  # a network controller that answers here
     db = tmp_path / "s.db"
     assert run("where", "-d", "faulty://arm", "--db", db, "--offline", "--set", "3=min").exit_code == 0
-    r = run("move", "-d", "faulty://arm:4000", "--db", db, "--joint", 3, "--steps", 10)
-    assert r.exit_code == 0, r.output
-    assert "warning: positions of this controller are also kept under faulty://arm," in r.stderr, r.stderr
-    assert "write the URL one way (faulty://arm:4000 here)" in r.stderr
+    before = _where(db, "faulty://arm")["joints"][2]["q"]
+    r = run("move", "--trust-calibration", "-d", "faulty://arm:4000", "-c", cal_path, "--db", db, "--joint", 3,
+            "--by", "100um")
+    assert r.exit_code == 0 and "warning" not in r.stderr, r.output
+    moved = _where(db, "faulty://arm:4000")["joints"][2]
+    assert moved["q"] == pytest.approx(before + 100e-6, abs=5e-6) and moved["source"] == "dead-reckoned"
+    for spelling in ("faulty://arm", "faulty://ARM/", "faulty://arm:4000/?timeout=5"):
+        assert _where(db, spelling)["joints"][2] == moved, spelling
 
 
 @pytest.mark.parametrize("failure", [RuntimeError("driver bug"), OSError(5, "Input/output error"),
@@ -1050,8 +1053,8 @@ def test_unlock_releases_a_lock_row_that_cannot_be_read(tmp_path, cal_path, faul
         con.execute("UPDATE device_state SET value = 'not json{' WHERE key = 'lock'")
     move = ("move", "--trust-calibration", "--from-unreferenced", "-d", "faulty://arm", "-c", cal_path, "--db", db,
             "-j", 3, "--by", "1um")
-    line = one_error(run(*move), f"the stored 'lock' of {spelling}")
-    assert line.endswith(f"release it with `stickslip where -d {spelling} --unlock`"), line  # the way out, said
+    line = one_error(run(*move), "the stored 'lock' of faulty://arm")  # one device however its URL is written
+    assert line.endswith("release it with `stickslip where -d faulty://arm --unlock`"), line  # the way out, said
     r = run("where", "-d", spelling, "--db", db, "--unlock", "--offline")
     assert r.exit_code == 0, r.output
     assert run(*move).exit_code == 0

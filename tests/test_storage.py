@@ -478,7 +478,7 @@ def test_a_schema_2_database_gets_content_keys_on_migration(tmp_path):
     con.commit()
     con.close()
     with Store.open(path) as st:
-        assert st.schema_version == SCHEMA_VERSION == 4
+        assert st.schema_version == SCHEMA_VERSION == 5
         assert st.duplicates([t], "sim://") == [0]
         key = st._con.execute("SELECT content FROM traverses").fetchone()[0]
         assert key == content_key(t, "sim://")

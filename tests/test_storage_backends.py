@@ -416,17 +416,16 @@ _ALIAS_HOLDER = textwrap.dedent("""
 
 @pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
 def test_one_controller_written_two_ways_takes_one_lock(db):
-    """anc300://h and anc300://h:7230 are one controller (its default port) with two kept positions; each took
-    its own lock, so two processes drove the controller at once (audit57). Now the second is refused, told
-    which spelling holds it (for `where --unlock`); another controller, or another arm's channel, is not."""
+    """anc300://h and anc300://h:7230 are one controller (its default port); each took its own lock, so two
+    processes drove the controller at once (audit57). Now (schema 5) they are one device, stored under one name
+    whose row holds the one lock: the second is refused; another controller, or another arm's channel, is not."""
     proc = subprocess.Popen([sys.executable, "-c", _ALIAS_HOLDER, str(db)], stdout=subprocess.PIPE, text=True)
     me = {"pid": os.getpid(), "host": "rig-1.lab", "since": "10:00"}
     try:
         assert proc.stdout.readline().strip() == "None"  # it took the lock
         with Store.open(db) as st:
             for spelling in ("anc300://h:7230", "anc300://H:7230/", "anc300://h/?password=x"):
-                assert st.acquire_lock(spelling, me) == {
-                    "pid": 424242, "host": "rig-2.lab", "since": "09:00", "device": "anc300://h"}, spelling
+                assert st.acquire_lock(spelling, me) == {"pid": 424242, "host": "rig-2.lab", "since": "09:00"}, spelling
             assert st.acquire_lock("anc300://h:7231", me) is None  # another controller
             st.release_lock("anc300://h:7231", me["pid"])
             assert st.acquire_lock("anc300://h:7230#arm=probe", me) is None  # a rig arm's lock is its own
@@ -437,7 +436,7 @@ def test_one_controller_written_two_ways_takes_one_lock(db):
         proc.stdout.close()
 
 
-def test_a_move_refused_by_another_spelling_names_it_for_unlock(tmp_path):
+def test_a_move_refused_through_another_spelling_names_the_one_device_for_unlock(tmp_path):
     from stickslip.procedures.move import DeviceBusy, device_lock
 
     with Store.open(tmp_path / "s.db") as st:
@@ -445,9 +444,11 @@ def test_a_move_refused_by_another_spelling_names_it_for_unlock(tmp_path):
         with pytest.raises(DeviceBusy) as e, device_lock(st, "anc300://h:7230"):
             pass
     assert str(e.value) == (
-        "anc300://h:7230 is being driven by another stickslip process through anc300://h (this controller written "
-        "another way) (pid 424242 on rig-2.lab since 09:00); wait for it to finish, or if that process is gone, "
-        "release the lock with `stickslip where -d anc300://h --unlock`")
+        "anc300://h:7230 is being driven by another stickslip process (pid 424242 on rig-2.lab since 09:00); wait for "
+        "it to finish, or if that process is gone, release the lock with `stickslip where -d anc300://h:7230 "
+        "--unlock`")
+    with Store.open(tmp_path / "s.db") as st:  # the lock is the one device's, whichever way --unlock writes it
+        assert [d["url"] for d in st.devices()] == ["anc300://h:7230"]
 
 
 def test_one_store_cannot_hold_a_device_twice(db):

@@ -269,8 +269,9 @@ def test_a_process_that_finds_the_upgrade_made_by_another_says_nothing_of_one(tm
 
 def test_a_stored_name_is_its_own_stored_name_so_the_upgrade_never_collides(tmp_path):
     """'anc300://h ?password=x' was stored as 'anc300://h ' (its host ending in a space), whose own name is
-    'anc300://h'; a schema-3 store holding both spellings could not be upgraded ('UNIQUE constraint failed:
-    devices.url'), so no command opened it (audit56, found by a hypothesis search over 20 000 URLs)."""
+    'anc300://h' (now 'anc300://h:7230', its controller's); a schema-3 store holding both spellings could not be
+    upgraded ('UNIQUE constraint failed: devices.url'), so no command opened it (audit56, found by a hypothesis
+    search over 20 000 URLs)."""
     from hypothesis import HealthCheck, given, settings
     from hypothesis import strategies as st
 
@@ -278,7 +279,7 @@ def test_a_stored_name_is_its_own_stored_name_so_the_upgrade_never_collides(tmp_
 
     for url in ("anc300://h ?password=x", "mm3a://COM3 #arm=x", "MM3A://x #a", "sim://?seed=3 "):
         assert stored_device(stored_device(url)) == stored_device(url), url
-    assert stored_device("anc300://h ?password=x") == "anc300://h"
+    assert stored_device("anc300://h ?password=x") == "anc300://h:7230"
 
     @settings(max_examples=300, deadline=None, suppress_health_check=list(HealthCheck))
     @given(st.sampled_from(["mm3a", "anc300", "sim", "sim+physics"]),
@@ -294,7 +295,7 @@ def test_a_stored_name_is_its_own_stored_name_so_the_upgrade_never_collides(tmp_
     db = tmp_path / "lab.db"
     _schema_3_store(db, {"anc300://h ?password=x": ROWS[:2], "anc300://h ": ROWS[2:3], "anc300://h": ROWS[3:4]})
     with Store.open(db) as st_:
-        assert [d["url"] for d in st_.devices()] == ["anc300://h"] and st_.count_traverses("anc300://h") == 4
+        assert [d["url"] for d in st_.devices()] == ["anc300://h:7230"] and st_.count_traverses("anc300://h") == 4
 
 
 def test_states_of_spellings_redacted_alike_are_all_kept_by_the_upgrade(tmp_path):
@@ -309,7 +310,7 @@ def test_states_of_spellings_redacted_alike_are_all_kept_by_the_upgrade(tmp_path
     con.commit()
     con.close()
     with Store.open(db) as st:
-        assert [d["url"] for d in st.devices()] == ["anc300://h"] and st.count_traverses() == 3
+        assert [d["url"] for d in st.devices()] == ["anc300://h:7230"] and st.count_traverses() == 3
         assert st.get_state("anc300://h", "position") == {"from": "anc300://h"}
         assert st.get_state("anc300://h", "position (from anc300://h?password=***)") == {"from": "anc300://h?x=a"}
         assert st.get_state("anc300://h", "position (from anc300://h?password=***, 2)") == {"from": "anc300://h?x=b"}
@@ -362,7 +363,7 @@ def test_an_old_name_that_names_no_device_loses_its_password_in_the_upgrade(tmp_
     assert b"hunter2" not in db.read_bytes() and b"hunter2" in (tmp_path / "lab.v3.db").read_bytes()
     assert b"hunter2" not in (tmp_path / "h.json").read_bytes()
     with Store.open(db) as st:
-        assert sorted(d["url"] for d in st.devices()) == ["anc300://h", "anc300://u:***@h:xx"]
+        assert sorted(d["url"] for d in st.devices()) == ["anc300://h:7230", "anc300://u:***@h:xx"]
         assert len(st.traverses(device="anc300://u:***@h:xx")) == 2
 
 

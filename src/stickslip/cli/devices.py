@@ -222,7 +222,6 @@ def move(
         run_seen("move", request, cal, camera, camera_tip, db, json_out, camera_calibration=camera_calibration)
         return
     with open_store(db) as store, user_errors(DeviceBusy, KeyError, DeviceError):
-        _warn_if_also_kept(store, device)
         result = move_joint(store, request, cal, warn=warn_later, ready=flush_warnings)
     failure = result.failure()
     if failure is not None:
@@ -231,16 +230,6 @@ def move(
         print_json(result.as_dict())
         return
     _print_move(result)
-
-
-def _warn_if_also_kept(store: object, device: str) -> None:
-    """Queue the warning that ``device``'s controller has positions kept under another spelling too."""
-    from ..procedures.where import also_kept, also_kept_warning
-
-    key = device_key(device)
-    others = also_kept(store, key)
-    if others:
-        warn_later(also_kept_warning(key, others))
 
 
 def _move_in_rig(rig_file: Path, arm: str | None, device: str | None, joint: int, by: str | None, to: str | None,
@@ -355,7 +344,6 @@ def _step_raw(device: str, joint: int, steps: int, burst: int, db: str | None, j
     from ..procedures.move import DeviceBusy, sent_text, step_joint
 
     with open_store(db) as store, user_errors(DeviceBusy, DeviceError):
-        _warn_if_also_kept(store, device)
         result = step_joint(store, device, joint, steps, burst=burst, ready=flush_warnings)
     lo, hi = result.state.bounds(joint)
     if result.outcome.error is not None:
@@ -553,10 +541,6 @@ def _print_where(result: WhereResult) -> None:
     say(f"{result.device}" + (f" (answers: {answers})" if answers else ""))
     if result.busy:
         warn(f"not asked whether it answers: {result.busy}")
-    if result.others:
-        from ..procedures.where import also_kept_warning
-
-        warn(also_kept_warning(result.device, result.others))
     from ..procedures.where import port_order_warning
 
     if (ports := port_order_warning(result.device)) is not None:

@@ -659,10 +659,9 @@ def controller_of(url: str) -> str:
     """The controller a device URL (or key) reaches: its :func:`device_key` with the scheme's default port
     written out and no ``/`` after a host.
 
-    Two keys with one ``controller_of`` are one controller written two ways; its kept positions
-    go by the key, so each spelling has its own, but they take one lock
-    (:func:`stickslip.storage.schema.lock_name`; docs/storage.md). ``ValueError``
-    for a malformed URL.
+    Two keys with one ``controller_of`` are one controller written two ways: one device, whose rows,
+    kept positions and lock are stored under this name (:func:`stickslip.storage.schema.stored_device`;
+    docs/storage.md). ``ValueError`` for a malformed URL.
 
     >>> controller_of("anc300://h"), controller_of("anc300://H:7230/"), controller_of("anc300://COM3")
     ('anc300://h:7230', 'anc300://h:7230', 'anc300://com3')

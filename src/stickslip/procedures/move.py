@@ -192,15 +192,13 @@ def device_lock(store: LockStore, device: str) -> Iterator[dict[str, Any]]:
             f"(StickSlipManipulator does); do not unlock it while that move runs"
         )
     if holder is not None:
-        other = holder.get("device")  # the same controller written another way holds it (storage.schema.lock_name)
         way_out = (  # --unlock refuses a holder known to run here (stickslip.processes): do not advise it
             "it is still running on this computer: wait for it to finish, or end it" if holder_running(holder)
             else f"wait for it to finish, or if that process is gone, release the lock with "
-                 f"`stickslip where -d {command_url(str(other or device))} --unlock`"
+                 f"`stickslip where -d {command_url(device)} --unlock`"
         )
-        through = f" through {other} (this controller written another way)" if other else ""
         raise DeviceBusy(
-            f"{device} is being driven by another stickslip process{through} ({holder_text(holder)}); {way_out}"
+            f"{device} is being driven by another stickslip process ({holder_text(holder)}); {way_out}"
         )
     try:
         yield me

@@ -12,7 +12,7 @@ import re
 from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
-from typing import Any, Protocol, runtime_checkable
+from typing import Any, Protocol
 from urllib.parse import urlsplit
 
 from ..devices.base import DeviceError, controller_of, device_key, open_device
@@ -23,8 +23,8 @@ from ..units import format_position
 from .move import DeviceBusy, LockStore, PoseUpdate, device_lock, holder_text, track_fields
 
 __all__ = [
-    "DeviceUnreachable", "ReferenceRefused", "WhereResult", "WhereStore", "also_kept", "also_kept_warning",
-    "port_order_warning", "probe_device", "state_rows", "where",
+    "DeviceUnreachable", "ReferenceRefused", "WhereResult", "WhereStore", "port_order_warning", "probe_device",
+    "state_rows", "where",
 ]
 
 
@@ -42,51 +42,6 @@ class ReferenceRefused(ValueError):
 
 class WhereStore(StateStore, LockStore, Protocol):
     """What :func:`where` needs of a store (``stickslip.storage.Store`` implements it)."""
-
-
-@runtime_checkable
-class ListsDevices(Protocol):
-    """A store that lists the devices it keeps (``stickslip.storage.Store``)."""
-
-    def devices(self) -> list[dict[str, Any]]: ...
-
-    def get_state(self, device: str, key: str, default: Any = None) -> Any: ...
-
-
-def also_kept(store: object, key: str) -> tuple[str, ...]:
-    """The other keys of ``key``'s controller (:func:`~stickslip.devices.base.controller_of`: its default port
-    written out or left off, a ``/`` after the host) under which ``store`` keeps positions; ``()`` for a store
-    that lists no devices. Each key has positions of its own (they share one lock: :func:`~stickslip.storage.
-    schema.lock_name`): a move made under one is not in the other.
-    """
-    if not isinstance(store, ListsDevices) or "#" in key:
-        return ()
-    try:
-        mine = controller_of(key)
-    except ValueError:
-        return ()
-    found = []
-    for row in store.devices():
-        url = str(row.get("url", ""))
-        if url == key or "#" in url:  # a rig arm's own key (#arm=NAME) is its rig's to name
-            continue
-        try:
-            same = controller_of(url) == mine
-        except ValueError:  # an older release's name that is no URL
-            continue
-        if same and store.get_state(url, "positions") is not None:
-            found.append(url)
-    return tuple(found)
-
-
-def also_kept_warning(key: str, others: Sequence[str]) -> str:
-    """The line that says ``key``'s controller has positions kept under ``others`` too (:func:`also_kept`)."""
-    return (
-        f"positions of this controller are also kept under {', '.join(others)}, the same controller written "
-        f"another way (its default port, or a / after the host): each spelling keeps positions of its own, so a "
-        f"move made under one is not in the other; write the URL one way ({key} here) and reference "
-        "the joints again under it (docs/storage.md)"
-    )
 
 
 _ENUMERATED_PORT = re.compile(r"/dev/(tty(?:USB|ACM)\d+|cu\.usb\S*)$")
@@ -166,7 +121,8 @@ class WhereResult:
     Attributes
     ----------
     device : str
-        The device's key (URL without options or secrets).
+        The name the device's state is kept under: its controller (:func:`~stickslip.devices.base.controller_of`:
+        the URL without options or secrets, the default port written out), or a rig arm's key.
     state : DeviceState
         The kept state (after any reference or pose recorded).
     changed : tuple of str
@@ -175,8 +131,6 @@ class WhereResult:
         What the device said about itself (``model`` and more), ``None`` if it was not asked.
     busy : str or None
         Why the device was not asked: another process drives it (the :class:`~.move.DeviceBusy` message).
-    others : tuple of str
-        Other spellings of this controller under which positions are kept too (:func:`also_kept`).
     replaced : str or None
         Why the kept positions were replaced by the defaults before recording (they could not be read:
         :class:`~stickslip.devices.positions.UnreadableState`); ``None`` when they were read.
@@ -187,7 +141,6 @@ class WhereResult:
     changed: tuple[str, ...] = ()
     info: dict[str, Any] | None = field(default=None)
     busy: str | None = None
-    others: tuple[str, ...] = ()
     replaced: str | None = None
 
     def as_dict(self) -> dict[str, object]:
@@ -196,7 +149,7 @@ class WhereResult:
         answers = self.info["model"] if self.info else None
         return {
             "device": self.device, "joints": state_rows(s), "theta": s.theta, "psi": s.psi, "answers": answers,
-            "info": self.info, "busy": self.busy, "also_kept": list(self.others),
+            "info": self.info, "busy": self.busy,
         }
 
 
@@ -228,7 +181,7 @@ def where(
     device's lock (:func:`~.move.device_lock`; :class:`~.move.DeviceBusy` while another
     process drives the device), as a command does; the server, which holds the lock, does not.
     """
-    lock = device_key(device)
+    lock = controller_of(device)  # the name its rows are kept and its lock taken under, however its URL is written
     key = key or lock
     if unlock:
         try:
@@ -261,7 +214,7 @@ def where(
         busy = _driven_by(store.get_state(lock, "lock"), lock)
         if busy is None:  # a probe beside a move would talk on the link the move is driving
             info = probe(device)
-    return WhereResult(key, state, tuple(changed), info, busy, also_kept(store, key), replaced)
+    return WhereResult(key, state, tuple(changed), info, busy, replaced)
 
 
 def _driven_by(holder: object, lock: str) -> str | None:

@@ -93,12 +93,17 @@ MIGRATIONS: tuple[str, ...] = (
     ALTER TABLE traverses ADD COLUMN content TEXT;
     CREATE INDEX traverses_content ON traverses(content)
     """,
-    # version 3 -> 4: every device is stored under its key (stored_device), however its URL was written; the
-    # rows of older spellings are renamed and merged by Store._key_devices, and their content keys recomputed.
+    # version 3 -> 4: every device is stored under its key (device_key), however its URL was written; the
+    # rows of older spellings are renamed and merged by storage.upgrade.key_devices, their content keys recomputed.
     # The index makes a traverse's calibration links quick to find (delete, and that merge).
     """
     CREATE INDEX calibration_traverses_traverse ON calibration_traverses(traverse_id)
     """,
+    # version 4 -> 5: every device is stored under its controller's name (stored_device: the default port written
+    # out, no / after the host), as its lock was taken: anc300://h, anc300://h:7230 and anc300://h/ kept three
+    # positions of one arm. No table changes; the devices are renamed and merged as at 4 (storage.upgrade), their
+    # kept positions merged by storage.spellings (a joint they kept apart becomes uncertain).
+    "",
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
@@ -106,18 +111,20 @@ _COLUMNS = ("joint", "direction", "q1", "q2", "q3", "theta", "psi", "start", "en
 
 
 def stored_device(url: str) -> str:
-    """The name a device's rows are stored under: its key (:func:`~stickslip.devices.base.device_key`).
+    """The name a device's rows are stored under, and its lock taken under: its controller
+    (:func:`~stickslip.devices.base.controller_of`: its key with the scheme's default port written out and no
+    ``/`` after the host).
 
-    One name however the URL is written: ``mm3a:///COM3``, ``mm3a://COM3?timeout=5`` and
-    ``mm3a://com3`` are ``mm3a://com3``; options and secrets are dropped, except a simulator's
-    ``seed`` (another simulated arm). A rig arm sharing its controller keeps its ``#arm=NAME``.
-    Raises ``ValueError`` (without a secret) for an empty URL, one with no scheme (which
-    :func:`device_key` would read as ``sim://``) or a malformed one.
+    One name however the URL is written: ``mm3a:///COM3``, ``mm3a://COM3?timeout=5`` and ``mm3a://com3`` are
+    ``mm3a://com3``; ``anc300://H``, ``anc300://h:7230/`` and ``anc300://h?password=x`` are
+    ``anc300://h:7230``; options and secrets are dropped, except a simulator's ``seed`` (another simulated
+    arm). A rig arm sharing its controller keeps its ``#arm=NAME``. Raises ``ValueError`` (without a secret)
+    for an empty URL, one with no scheme (which :func:`device_key` would read as ``sim://``) or a malformed one.
 
-    >>> stored_device("anc300://h:7230?password=x"), stored_device("sim://?seed=3&realtime=1")
+    >>> stored_device("anc300://h?password=x"), stored_device("sim://?seed=3&realtime=1")
     ('anc300://h:7230', 'sim://?seed=3')
-    >>> stored_device("mm3a:///COM3#arm=left")
-    'mm3a://com3#arm=left'
+    >>> stored_device("mm3a:///COM3#arm=left"), stored_device("anc300://H:7230/#arm=left")
+    ('mm3a://com3#arm=left', 'anc300://h:7230#arm=left')
     """
     text = str(url).strip()
     if not text:
@@ -126,8 +133,8 @@ def stored_device(url: str) -> str:
     base = text[: arm.start()] if arm else text
     url_scheme(base)
     # rstrip: 'anc300://h ?password=x' has the key 'anc300://h ' (a host ending in a space), whose own stored name
-    # is 'anc300://h': the name of a name must be itself, or the upgrade's rename collides (UNIQUE devices.url)
-    return device_key(base).rstrip() + (arm.group(0) if arm else "")
+    # is 'anc300://h:7230': the name of a name must be itself, or the upgrade's rename collides (UNIQUE devices.url)
+    return controller_of(device_key(base).rstrip()) + (arm.group(0) if arm else "")
 
 
 _ARM = re.compile(r"#arm=[A-Za-z0-9][A-Za-z0-9 _.\-]{0,39}$")
@@ -144,20 +151,14 @@ def device_filter(url: str) -> str:
 
 
 def lock_name(url: str) -> str:
-    """The name of the lock a device URL takes: its controller (:func:`~stickslip.devices.base.controller_of`,
-    the default port written out, no ``/`` after the host) and a rig arm's ``#arm=NAME``. Two spellings of one
-    controller (``anc300://h`` and ``anc300://h:7230``) keep two kept positions but take one lock, so two
-    processes never drive it at once. Never raises.
+    """The name of the lock a device URL takes: its stored name (:func:`device_filter`: the controller's, and a rig
+    arm's ``#arm=NAME``), so that two processes never drive one controller at once, however each wrote its URL.
+    Never raises.
 
     >>> lock_name("anc300://h"), lock_name("anc300://H:7230/?password=x"), lock_name("mm3a:///COM3#arm=left")
     ('anc300://h:7230', 'anc300://h:7230', 'mm3a://com3#arm=left')
     """
-    name = device_filter(url)
-    base, hash_, arm = name.partition("#")
-    try:
-        return controller_of(base) + hash_ + arm
-    except ValueError:
-        return name
+    return device_filter(url)
 
 
 def content_key(t: Traverse, device: str) -> str:

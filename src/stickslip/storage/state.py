@@ -81,9 +81,8 @@ class StateStore(_Base):
         that no longer exists (:func:`~stickslip.processes.process_gone`, POSIX only;
         elsewhere a lock is released only by its holder, or by ``where --unlock``) is taken over.
 
-        One controller written two ways (``anc300://h``, ``anc300://h:7230``: :func:`~.schema.lock_name`)
-        takes one lock: a holder of the other spelling is returned with its ``"device"`` (the
-        spelling whose row holds it, for the caller's ``--unlock`` advice).
+        One controller written two ways (``anc300://h``, ``anc300://h:7230``) is one device, stored under
+        one name (:func:`~.schema.stored_device`) whose row holds its one lock (:func:`~.schema.lock_name`).
         """
         name = f"device {lock_name(device)}"  # one lock however the URL is written, the controller's default port too
         claimed: bool | None = None
@@ -94,13 +93,9 @@ class StateStore(_Base):
                 if claimed is False:  # a live connection holds it (the server knows)
                     if isinstance(current, dict):
                         return dict(current)
-                    if (alias := self._alias_holder(con, device, dev)) is not None:
-                        return alias
                     return {"pid": "?", "host": "another connection to the shared database", "since": "?"}
                 if claimed is None and isinstance(current, dict) and not process_gone(current):  # unknown: running
                     return dict(current)
-                if claimed is None and (alias := self._alias_holder(con, device, dev)) is not None:
-                    return alias
                 con.execute(
                     "INSERT INTO device_state (device_id, key, value, updated_at) VALUES (?, 'lock', ?, ?) "
                     "ON CONFLICT (device_id, key) DO UPDATE SET value = excluded.value, "
@@ -111,21 +106,6 @@ class StateStore(_Base):
             if claimed:  # the row was not written: nor is the lock held
                 self._con.release(name)
             raise
-        return None
-
-    def _alias_holder(self, con: Backend, device: str, dev: int) -> dict[str, Any] | None:
-        """A running holder of the lock of another spelling of ``device``'s controller (SQLite: no advisory lock
-        names the controller), with the ``"device"`` whose row holds it; or None."""
-        mine = lock_name(device)
-        rows = con.execute(
-            "SELECT d.url AS url, s.value AS value FROM device_state s JOIN devices d ON d.id = s.device_id "
-            "WHERE s.key = 'lock' AND s.device_id <> ?", (dev,)
-        ).fetchall()
-        for r in rows:
-            if lock_name(str(r["url"])) == mine:
-                held = self._readable_lock(r["value"], str(r["url"]))
-                if isinstance(held, dict) and not process_gone(held):
-                    return {**held, "device": str(r["url"])}
         return None
 
     def _lock_row(self, con: Backend, device: str) -> tuple[int, Any]:

@@ -1,4 +1,4 @@
-"""Upgrading an older stickslip's database: its copy first, and its devices named by their keys (schema 4).
+"""Upgrading an older stickslip's database: its copy first, and its devices named by their controllers (schema 5).
 
 Also the pieces of a whole-file copy that :meth:`Store.backup` shares (its temporary name, its removal).
 """
@@ -15,9 +15,11 @@ from ..measurements import Traverse
 from ..records import temp_stem
 from .backend import Backend
 from .schema import StoreError, _content_keys, stored_device
+from .spellings import merge_state
 
-KEYED_AT = 4
-"""The schema version from which every device is stored under :func:`~.schema.stored_device`."""
+KEYED_AT = 5
+"""The schema version from which every device is stored under :func:`~.schema.stored_device` as it is now (its
+controller's name; from 4 to 5 its URL's key): an older store's devices are renamed and merged (:func:`key_devices`)."""
 
 
 def row_traverse(r: Any) -> Traverse:
@@ -138,7 +140,7 @@ def key_devices(con: Backend) -> list[str]:
             if dst not in origin:
                 origin[dst] = dict.fromkeys(_traverse_ids(con, dst), dst)
             origin[dst].update(dict.fromkeys(_traverse_ids(con, did), did))
-            said.append(_merge(con, did, dst, url, key))
+            said += _merge(con, did, dst, url, key, redact_url(dict(rows)[dst]))
         renamed.add(owner[key])
     for did in sorted(renamed):
         _rekey_content(con, did)
@@ -164,8 +166,10 @@ def _url(con: Backend, did: int) -> str:
     return str(con.execute("SELECT url FROM devices WHERE id = ?", (did,)).fetchone()[0])
 
 
-def _merge(con: Backend, src: int, dst: int, url: str, key: str) -> str:
-    """Move everything of device ``src`` (stored as ``url``) to ``dst`` (named ``key``); the line saying so."""
+def _merge(con: Backend, src: int, dst: int, url: str, key: str, was: str) -> list[str]:
+    """Move everything of device ``src`` (stored as ``url``) to ``dst`` (named ``key``, stored as ``was`` before
+    the upgrade); the lines saying so (the merge, and what of their kept state the user must know of:
+    :func:`~.spellings.merge_state`)."""
     n = int(con.execute(
         "SELECT COUNT(*) FROM traverses t JOIN sessions s ON s.id = t.session_id WHERE s.device_id = ?", (src,)
     ).fetchone()[0])
@@ -178,23 +182,13 @@ def _merge(con: Backend, src: int, dst: int, url: str, key: str) -> str:
             con.execute("UPDATE traverses SET session_id = ? WHERE session_id = ?", (int(same[0]), sid))
             con.execute("DELETE FROM sessions WHERE id = ?", (sid,))
     cals = con.execute("UPDATE calibrations SET device_id = ? WHERE device_id = ?", (dst, src)).rowcount
-    held = {str(r[0]) for r in con.execute("SELECT key FROM device_state WHERE device_id = ?", (dst,))}
-    state = [tuple(r) for r in con.execute("SELECT key, value, updated_at FROM device_state WHERE device_id = ?",
-                                           (src,))]
-    con.execute("DELETE FROM device_state WHERE device_id = ?", (src,))
-    for name, value, updated in state:
-        kept, again = name, 0
-        while kept in held:  # two spellings redacted alike (an old store's raw ?password=a and =b) keep both
-            again += 1
-            kept = f"{name} (from {redact_url(url)}{'' if again == 1 else f', {again}'})"
-        held.add(kept)
-        con.execute("INSERT INTO device_state (device_id, key, value, updated_at) VALUES (?, ?, ?, ?)",
-                    (dst, kept, value, updated))
+    problems = merge_state(con, src, dst, url, key, was)
     con.execute("UPDATE devices SET model = (SELECT model FROM devices WHERE id = ?) WHERE id = ? AND model IS NULL",
                 (src, dst))
     con.execute("DELETE FROM devices WHERE id = ?", (src,))
-    return (f"the devices {redact_url(url)} and {key} are one device now, {key} (docs/storage.md): the {n} "
-            f"traverse(s) and {max(cals, 0)} calibration(s) of {redact_url(url)} moved to it, none deleted")
+    return [f"the devices {redact_url(url)} and {key} are one device now, {key} (docs/storage.md): the {n} "
+            f"traverse(s) and {max(cals, 0)} calibration(s) of {redact_url(url)} moved to it, none deleted",
+            *problems]
 
 
 def _rekey_content(con: Backend, did: int) -> None:
