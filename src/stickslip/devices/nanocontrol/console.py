@@ -125,6 +125,12 @@ def split_burst(n: int) -> list[tuple[int, int]]:
     return [(hi, m), (r, 1)]
 
 
+def _halted(dev: NanoControlConsole, what: str, made: int, at_most: int) -> StepsUncertain:
+    """A ``step()`` ended by :meth:`NanoControlConsole.stop` from another thread: ``made`` steps certain, at most
+    ``at_most`` (the stopped part made between none and all of its steps; a part never sent, none)."""
+    return StepsUncertain(f"NanoControl on {dev.transport.name}: {what}", made, at_most)
+
+
 class NanoControlConsole(SpeedProfiles):
     """A current Kleindiek NanoControl (console dialect), as a :class:`~stickslip.devices.base.Controller`.
 
@@ -304,9 +310,8 @@ class NanoControlConsole(SpeedProfiles):
                 self._in_step = False
                 self._restore_quietly()
             if made != n:  # stop() from another thread before a burst: the rest was not sent
-                raise StepsUncertain(
-                    f"NanoControl on {self.transport.name}: {n - made:+d} steps on channel {ch} were not sent: "
-                    "stop() was called from another thread", made, made)
+                raise _halted(self, f"{n - made:+d} steps on channel {ch} were not sent: stop() was called from "
+                              "another thread", made, made)
 
     def _part(self, ch: str, count: int, m: int, made: int) -> None:
         """One ``go``: ``count x |m|`` steps in the sign of ``m``, stopped on time or raising."""
@@ -358,9 +363,8 @@ class NanoControlConsole(SpeedProfiles):
         t_stopped = self._clock()
         self._driving = False
         if self._halt:  # stopped early by stop() from another thread, as asked: how far it went is not known
-            raise StepsUncertain(
-                f"NanoControl on {self.transport.name}: {go!r} was stopped by stop() from another thread: "
-                f"between none and all of its {steps} steps were made", made, made + sign * steps)
+            raise _halted(self, f"{go!r} was stopped by stop() from another thread: between none and all of its "
+                          f"{steps} steps were made", made, made + sign * steps)
         late = t_stopped - t_sent
         if late >= t_ms / 1000.0:
             intervals = math.ceil(late / (t_ms / 1000.0))
