@@ -1,4 +1,4 @@
-"""audit66: image files from other tools (1-bit, palette, inverted-grey and CMYK TIFFs) read as the picture they hold."""
+"""audit66: image files from other tools (1-bit, palette, inverted-grey, CMYK TIFFs) read as the picture they hold."""
 
 from __future__ import annotations
 
@@ -27,9 +27,55 @@ def test_booleans_become_0_and_1_as_the_docstring_says():
     assert np.array_equal(img, mask.astype(float))
 
 
-def test_a_1_bit_tiff_reads_black_and_white(tmp_path: Path):
+def test_a_1_bit_tiff_reads_black_and_white_as_a_viewer_shows_it(tmp_path: Path):
+    """tifffile writes a bool array as MinIsWhite (True stored as 1 is black), Pillow as BlackIsZero: each file
+    reads as Pillow shows it, 0 and 1 (before: 0 and 1/255, and tifffile's file inverted)."""
     mask = _gradient() > 128
     tifffile.imwrite(tmp_path / "tifffile.tif", mask)
     PIL.fromarray(mask).save(tmp_path / "pillow.tif")
-    for name in ("tifffile.tif", "pillow.tif"):
-        assert np.array_equal(read_image(tmp_path / name), mask.astype(float)), name
+    for name, want in (("tifffile.tif", ~mask), ("pillow.tif", mask)):
+        with PIL.open(tmp_path / name) as im:
+            shown = np.asarray(im.convert("L"), dtype=float) / 255.0
+        assert np.array_equal(shown, want.astype(float)), name
+        assert np.array_equal(read_image(tmp_path / name), shown), name
+
+
+def _luminance(rgb: np.ndarray) -> np.ndarray:
+    f = rgb.astype(float) / float(np.iinfo(rgb.dtype).max)
+    return f[..., 0] * LUMINANCE[0] + f[..., 1] * LUMINANCE[1] + f[..., 2] * LUMINANCE[2]
+
+
+def test_a_palette_tiff_reads_its_colours_not_its_indices(tmp_path: Path):
+    """A palette TIFF's pixels are indices into its colour map: read raw they were the index / 255 (here a
+    ramp of 0..7 / 255 for a picture that runs from white to dark), a picture no viewer shows."""
+    index = (_gradient() // 32).astype(np.uint8)  # 0..7, left to right
+    cmap = np.zeros((3, 256), np.uint16)
+    cmap[:, :8] = (65535 - np.arange(8) * 8000)[None, :]  # index 0 white, darker to the right
+    tifffile.imwrite(tmp_path / "p.tif", index, photometric="palette", colormap=cmap)
+    want = cmap[0, index] / 65535.0
+    assert np.allclose(read_image(tmp_path / "p.tif"), want, atol=1e-12)
+    colours = np.dstack([_gradient(), 255 - _gradient(), _gradient() // 2])
+    pal = PIL.fromarray(colours).convert("P", palette=PIL.Palette.ADAPTIVE, colors=16)
+    pal.save(tmp_path / "pil.tif")
+    shown = _luminance(np.asarray(pal.convert("RGB")))  # Pillow writes a colour c as c * 256 in the map, not c * 257
+    assert np.allclose(read_image(tmp_path / "pil.tif"), shown, atol=1 / 255)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, bool])
+def test_an_inverted_grey_tiff_reads_as_a_viewer_shows_it(tmp_path: Path, dtype: type):
+    """PhotometricInterpretation 0 (MinIsWhite): 0 is white. Read raw, the picture was inverted."""
+    raw = _gradient() > 128 if dtype is bool else (_gradient().astype(np.uint64) * np.iinfo(dtype).max // 255)
+    raw = raw.astype(dtype)
+    tifffile.imwrite(tmp_path / "w.tif", raw, photometric="miniswhite")
+    got = read_image(tmp_path / "w.tif")
+    want = 1.0 - (raw.astype(float) if dtype is bool else raw / float(np.iinfo(dtype).max))
+    assert np.allclose(got, want, atol=1e-12)
+    assert got[0, 0] == 1.0 and got[0, -1] == 0.0  # white on the left, where the file stores 0
+
+
+def test_a_cmyk_tiff_reads_as_its_colours(tmp_path: Path):
+    """A CMYK TIFF (print software's 'separated') has ink, not light: read as RGBA its ramp ran backwards."""
+    rgb = np.dstack([_gradient()] * 3)
+    PIL.fromarray(rgb).convert("CMYK").save(tmp_path / "c.tif")
+    got = read_image(tmp_path / "c.tif")
+    assert np.allclose(got, _gradient() / 255.0, atol=1e-12)

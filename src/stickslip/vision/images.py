@@ -3,8 +3,9 @@
 The libraries are optional (the ``vision`` extra) and imported when a file is read:
 
 * **TIFF** through tifffile (every sample type, floats with their NaN, stacks told apart
-  from colour); a TIFF compressed with a codec tifffile needs ``imagecodecs`` for (LZW,
-  JPEG) is read by Pillow instead, which has those codecs built in;
+  from colour), as a viewer shows it (:func:`_as_shown`: a palette looked up, an inverted
+  grey turned over); a TIFF compressed with a codec tifffile needs ``imagecodecs`` for (LZW,
+  JPEG), or in CMYK, YCbCr or CIELab, is read by Pillow instead, which has those built in;
 * **PNG** (and JPEG, BMP, ...) through Pillow, except a 16-bit colour PNG, which Pillow
   would silently cut to 8 bits: that one is read by OpenCV when it is installed, and
   refused with the reason otherwise.
@@ -149,6 +150,9 @@ def _read_tiff(p: Path) -> tuple[NDArray[np.float64], Stated]:
                 if "imagecodecs" in str(e):  # LZW, JPEG, ...: Pillow has them built in
                     return _read_with_pillow(p)[0], stated
                 raise
+            data = _as_shown(p, page, data)
+            if data is None:  # CMYK, YCbCr, CIELab, ...: Pillow turns them into RGB, or says why not
+                return _read_with_pillow(p)[0], stated
     except ImageError:
         raise
     except MemoryError:
@@ -158,6 +162,38 @@ def _read_tiff(p: Path) -> tuple[NDArray[np.float64], Stated]:
     if data.ndim == 3 and data.shape[0] in (3, 4) and data.shape[2] not in (1, 2, 3, 4):
         data = np.moveaxis(data, 0, -1)  # planar colour (samples first)
     return as_image(data, str(p)), stated
+
+
+_MINISWHITE, _MINISBLACK, _RGB, _PALETTE = 0, 1, 2, 3
+"""TIFF PhotometricInterpretation values: inverted grey, grey, RGB, palette."""
+
+
+def _as_shown(p: Path, page: Any, data: NDArray[Any]) -> NDArray[Any] | None:
+    """A TIFF page's samples as the picture a viewer shows; ``None`` for an interpretation left to Pillow.
+
+    Grey and RGB are the samples; an inverted grey (MinIsWhite: 0 is white) is turned over by the type's
+    largest value; a palette image's indices become their colour map's RGB (16 bits). Read raw, these were
+    another picture (a palette's index / 255, an inverted grey) with nothing said."""
+    photometric = int(page.photometric)
+    if photometric in (_MINISBLACK, _RGB):
+        return data
+    if photometric == _MINISWHITE:
+        if data.dtype == bool:
+            return ~data
+        if np.issubdtype(data.dtype, np.unsignedinteger):
+            return np.iinfo(data.dtype).max - data
+        raise ImageError(f"{p}: an inverted grey TIFF (MinIsWhite) of {data.dtype} samples has no white level to "
+                         "turn it over by: save it as ordinary grey (BlackIsZero)")
+    if photometric == _PALETTE:
+        cmap = page.colormap
+        if cmap is None or data.ndim != 2 or not np.issubdtype(data.dtype, np.unsignedinteger):
+            raise ImageError(f"{p}: a palette TIFF without a colour map for its {data.dtype} samples")
+        cmap = np.asarray(cmap, dtype=np.uint16).reshape(3, -1)
+        if int(data.max()) >= cmap.shape[1]:
+            raise ImageError(f"{p}: a palette index of {int(data.max())} beyond the {cmap.shape[1]} colours of its "
+                             "colour map (a damaged file)")
+        return np.moveaxis(np.take(cmap, data, axis=1), 0, -1)
+    return None
 
 
 def _read_with_pillow(p: Path) -> tuple[NDArray[np.float64], Stated]:
