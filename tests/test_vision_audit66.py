@@ -79,3 +79,22 @@ def test_a_cmyk_tiff_reads_as_its_colours(tmp_path: Path):
     PIL.fromarray(rgb).convert("CMYK").save(tmp_path / "c.tif")
     got = read_image(tmp_path / "c.tif")
     assert np.allclose(got, _gradient() / 255.0, atol=1e-12)
+
+
+def test_camera_grab_refuses_a_frame_a_png_cannot_hold_instead_of_clipping_it(tmp_path: Path):
+    """A float TIFF in counts (100..4007) was saved as a PNG all 65535, exit 0; a signed one lost its negatives."""
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    counts = 100.0 + 4000.0 * np.add.outer(np.arange(20), np.arange(24)) / 43.0
+    tifffile.imwrite(tmp_path / "counts.tif", counts.astype(np.float32))
+    tifffile.imwrite(tmp_path / "signed.tif", (counts - 2000).astype(np.int16))
+    runner = CliRunner()
+    for name, words in (("counts.tif", "run from 100 to 4007"), ("signed.tif", "run from -0.057985 to 0.06122")):
+        out = tmp_path / f"{name}.png"
+        r = runner.invoke(app, ["camera", "grab", "--camera", f"files://{tmp_path / name}", "-o", str(out)])
+        assert r.exit_code == 2, r.output
+        lines = r.output.splitlines()
+        assert len(lines) == 1 and lines[0].startswith("error:") and words in r.output, r.output
+        assert "nothing written" in r.output and not out.exists()

@@ -327,7 +327,10 @@ def _reason(e: BaseException) -> str:
 
 
 def write_png(path: str | os.PathLike[str], image: NDArray[np.float64]) -> None:
-    """Save a grey image (values in [0, 1]; outside clipped) as a 16-bit PNG, atomically (Pillow)."""
+    """Save a grey image (values in [0, 1]) as a 16-bit PNG, atomically (Pillow).
+
+    :class:`ImageError`, nothing written, for values outside [0, 1] (a float TIFF in counts, a signed image's
+    negatives): clipped, they were a PNG all white or all black with nothing said."""
     try:
         from PIL import Image
     except ImportError:
@@ -337,6 +340,10 @@ def write_png(path: str | os.PathLike[str], image: NDArray[np.float64]) -> None:
     a = np.asarray(image, dtype=float)
     if a.ndim != 2 or not np.all(np.isfinite(a)):
         raise ImageError(f"{path}: only a finite 2-D grey image can be saved")
-    data = np.round(np.clip(a, 0.0, 1.0) * 65535.0).astype(np.uint16)
+    lo, hi = float(a.min()), float(a.max())
+    if lo < 0.0 or hi > 1.0:
+        raise ImageError(f"{path}: the frame's values run from {lo:.5g} to {hi:.5g} (a float or signed image): "
+                         "a 16-bit PNG holds 0 to 1, and clipped they would lose the picture; nothing written")
+    data = np.round(a * 65535.0).astype(np.uint16)
     im = Image.fromarray(data)
     atomic_write(path, lambda f: im.save(f, format="PNG"), mode="wb")
