@@ -98,3 +98,31 @@ def test_camera_grab_refuses_a_frame_a_png_cannot_hold_instead_of_clipping_it(tm
         lines = r.output.splitlines()
         assert len(lines) == 1 and lines[0].startswith("error:") and words in r.output, r.output
         assert "nothing written" in r.output and not out.exists()
+
+
+def test_locate_tracks_the_frames_it_checked_when_the_folder_changes_between_its_passes(tmp_path: Path):
+    """camera locate reads every frame, then tracks them: it named the folder's files twice. A frame written
+    into the folder meanwhile (a camera still saving) that sorts first was tracked as the first frame, the
+    needle learnt at --tip in a frame nobody checked, and the last checked frame dropped with nothing said."""
+    from stickslip.devices import open_device
+    from stickslip.vision.camera import open_camera
+    from stickslip.vision.images import write_png
+    from stickslip.vision.locate import locate
+
+    dev = open_device("sim://")
+    cam = open_camera("simcam://?pixel=0.5um&seed=3", dev)
+    folder = tmp_path / "run"
+    folder.mkdir()
+    for k in range(3):
+        write_png(folder / f"f{k + 1}.png", cam.grab().image)
+    late = cam.grab().image
+    cam.close()
+    dev.close()
+
+    def progress(done: int, total: int) -> None:
+        if total == 0 and done == 1:  # the first pass has read one frame: another appears, sorting first
+            write_png(folder / "a0.png", np.zeros_like(late))
+
+    found = locate([folder], (307.2, 256.0), progress=progress)
+    assert [Path(f.frame).name for f in found] == ["f1.png", "f2.png", "f3.png"]
+    assert all(f.fix is not None for f in found)
