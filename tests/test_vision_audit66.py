@@ -126,3 +126,18 @@ def test_locate_tracks_the_frames_it_checked_when_the_folder_changes_between_its
     found = locate([folder], (307.2, 256.0), progress=progress)
     assert [Path(f.frame).name for f in found] == ["f1.png", "f2.png", "f3.png"]
     assert all(f.fix is not None for f in found)
+
+
+def test_a_glob_that_matches_only_folders_says_so(tmp_path: Path):
+    """'run*' over folders run1, run2 said 'no file matches the pattern', as if nothing were there."""
+    from stickslip.vision.files import frame_paths
+    from stickslip.vision.frame import ImageError
+
+    for name in ("run1", "run2"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "f1.png").write_bytes(b"")
+    with pytest.raises(ImageError) as e:
+        frame_paths([str(tmp_path / "run*")])
+    text = str(e.value)
+    assert "matches 2 folder(s)" in text and str(tmp_path / "run1") in text and "run*/*.png" in text, text
+    assert len(frame_paths([str(tmp_path / "run*" / "*.png")])) == 2
