@@ -141,3 +141,26 @@ def test_a_glob_that_matches_only_folders_says_so(tmp_path: Path):
     text = str(e.value)
     assert "matches 2 folder(s)" in text and str(tmp_path / "run1") in text and "run*/*.png" in text, text
     assert len(frame_paths([str(tmp_path / "run*" / "*.png")])) == 2
+
+
+def test_a_grey_tiff_with_extra_samples_reads_its_grey(tmp_path: Path):
+    """A grey page with extra samples: planar grey + alpha was refused as 'a stack of 2 images'; contiguous grey
+    with two more channels was read as RGB (0.787 where the grey is 0)."""
+    grey = np.tile(np.arange(24, dtype=np.uint16) * 2000, (20, 1))
+    full = np.full_like(grey, 65535)
+    tifffile.imwrite(tmp_path / "planar.tif", np.stack([grey, full]), photometric="minisblack",
+                     planarconfig="separate", extrasamples=["unassalpha"])
+    tifffile.imwrite(tmp_path / "contig.tif", np.dstack([grey, full, full]), photometric="minisblack",
+                     planarconfig="contig", extrasamples=["unspecified", "unspecified"])
+    tifffile.imwrite(tmp_path / "rgb5.tif", np.dstack([grey, grey, grey, full, full]), photometric="rgb",
+                     planarconfig="contig", extrasamples=["unspecified", "unspecified"])
+    tifffile.imwrite(tmp_path / "rgbplanar.tif", np.stack([grey, grey, grey]), photometric="rgb",
+                     planarconfig="separate")
+    for name in ("planar.tif", "contig.tif", "rgb5.tif", "rgbplanar.tif"):
+        assert np.allclose(read_image(tmp_path / name), grey / 65535.0, atol=1e-12), name
+    tifffile.imwrite(tmp_path / "volume.tif", np.zeros((3, 20, 24), np.uint8), photometric="minisblack",
+                     volumetric=True, tile=(16, 16))  # one page of 3 slices (ImageDepth): still a stack
+    from stickslip.vision.frame import ImageError
+
+    with pytest.raises(ImageError, match="stack of 3"):
+        read_image(tmp_path / "volume.tif")

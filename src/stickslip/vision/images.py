@@ -159,8 +159,6 @@ def _read_tiff(p: Path) -> tuple[NDArray[np.float64], Stated]:
         raise ImageError(f"{p}: not a readable TIFF (it asks for more memory than there is)") from None
     except Exception as e:  # noqa: BLE001  - tifffile raises many kinds on a damaged file
         raise ImageError(f"{p}: not a readable TIFF ({_reason(e)})") from None
-    if data.ndim == 3 and data.shape[0] in (3, 4) and data.shape[2] not in (1, 2, 3, 4):
-        data = np.moveaxis(data, 0, -1)  # planar colour (samples first)
     return as_image(data, str(p)), stated
 
 
@@ -173,8 +171,18 @@ def _as_shown(p: Path, page: Any, data: NDArray[Any]) -> NDArray[Any] | None:
 
     Grey and RGB are the samples; an inverted grey (MinIsWhite: 0 is white) is turned over by the type's
     largest value; a palette image's indices become their colour map's RGB (16 bits). Read raw, these were
-    another picture (a palette's index / 255, an inverted grey) with nothing said."""
+    another picture (a palette's index / 255, an inverted grey) with nothing said. Samples stored planar
+    (samples first) are put last; a grey page's extra samples (alpha, other channels) are not its grey, nor an
+    RGB page's beyond the third its colour."""
     photometric = int(page.photometric)
+    spp = int(page.samplesperpixel)
+    if spp > 1 and data.ndim == 3 and int(page.planarconfig) == 2 and data.shape[0] == spp:
+        data = np.moveaxis(data, 0, -1)  # planar (samples first): as a contiguous page's
+    if spp > 1 and data.ndim == 3 and data.shape[-1] == spp:
+        if photometric in (_MINISWHITE, _MINISBLACK, _PALETTE):
+            data = data[..., 0]
+        elif photometric == _RGB:
+            data = data[..., :3]
     if photometric in (_MINISBLACK, _RGB):
         return data
     if photometric == _MINISWHITE:
