@@ -164,3 +164,22 @@ def test_a_grey_tiff_with_extra_samples_reads_its_grey(tmp_path: Path):
 
     with pytest.raises(ImageError, match="stack of 3"):
         read_image(tmp_path / "volume.tif")
+
+
+def test_a_video_without_frames_is_named_in_the_one_line(tmp_path: Path):
+    """camera locate said 'error: the recording has no frames' (which?); grab '... has no more frames (after 0)'."""
+    cv2 = pytest.importorskip("cv2")
+    from typer.testing import CliRunner
+
+    from stickslip.cli import app
+
+    video = tmp_path / "empty run.avi"
+    cv2.VideoWriter(str(video), cv2.VideoWriter_fourcc(*"MJPG"), 10, (64, 64)).release()
+    assert video.stat().st_size > 0
+    runner = CliRunner()
+    for args in (["camera", "locate", str(video), "--tip", "30,30"],
+                 ["camera", "grab", "--camera", f"video://{video}", "-o", str(tmp_path / "g.png")]):
+        r = runner.invoke(app, args)
+        assert r.exit_code == 2, r.output
+        lines = r.output.splitlines()
+        assert len(lines) == 1 and str(video) in lines[0] and "has no frames" in lines[0], r.output

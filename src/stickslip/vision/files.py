@@ -245,6 +245,9 @@ class _CaptureCamera:
         ok, data = self._cap.read()
         if not ok or data is None:
             if self._recorded:
+                if self._k == 0:
+                    raise CameraEnded(f"{redact_url(self._url)} has no frames (an empty video, or one OpenCV cannot "
+                                      "decode)")
                 raise CameraEnded(f"{redact_url(self._url)} has no more frames (after {self._k})")
             raise CameraError(f"{redact_url(self._url)} delivered no frame (disconnected or in use?)")
         if data.ndim == 3 and data.shape[2] in (3, 4):

@@ -118,8 +118,8 @@ def locate(
         turned, stated_pixel = getattr(camera, "turned", None), getattr(camera, "stated_pixel", None)
     finally:
         camera.close()
-    if n == 0:
-        raise ImageError("the recording has no frames")
+    if n == 0:  # a video that opens and gives none (files named are never none: frame_paths refuses that)
+        raise ImageError(f"{', '.join(os.fspath(x) for x in names[:3])}: the recording has no frames")
     camera = open_frames(names) if paths is None else FileCamera(paths)
     try:
         first = camera.grab()
