@@ -494,6 +494,9 @@ def grab_cmd(
 ) -> None:
     """Take one frame from a camera and save it as a 16-bit grey PNG.
 
+    A PNG holds grey values 0 to 1: a frame outside them (a float TIFF in counts, a signed one's negatives) is
+    refused, nothing written, rather than clipped.
+
     For simcam:// the arm is the device's kept pose (stickslip where), and the simulator's
     true tip is printed too (sim_true_tip, px), as move prints the simulator's true end.
 

@@ -84,8 +84,14 @@ def _named_frames(text: str) -> list[Path]:
         return found
     if p.exists() or not any(c in text for c in "*?["):
         return [p]
-    matches = sorted((Path(m) for m in _glob(text) if Path(m).is_file()), key=name_order)
+    named = [Path(m) for m in _glob(text)]
+    matches = sorted((m for m in named if m.is_file()), key=name_order)
     if not matches:
+        folders = sorted((m for m in named if m.is_dir()), key=name_order)
+        if folders:  # 'run*' meant as the runs' frames: say what it matched, not only what it did not
+            raise ImageError(f"{text}: the pattern matches {len(folders)} folder(s) ({folders[0]}"
+                             f"{', ...' if len(folders) > 1 else ''}) and no file: name a folder to read its "
+                             f"images, or match the files in them ({os.path.join(text, '*.png')})")
         raise ImageError(f"{text}: no file matches the pattern")
     images = [m for m in matches if m.suffix.lower() in IMAGE_SUFFIXES]  # as a folder: Thumbs.db is not a frame
     if not images:
@@ -239,6 +245,9 @@ class _CaptureCamera:
         ok, data = self._cap.read()
         if not ok or data is None:
             if self._recorded:
+                if self._k == 0:
+                    raise CameraEnded(f"{redact_url(self._url)} has no frames (an empty video, or one OpenCV cannot "
+                                      "decode)")
                 raise CameraEnded(f"{redact_url(self._url)} has no more frames (after {self._k})")
             raise CameraError(f"{redact_url(self._url)} delivered no frame (disconnected or in use?)")
         if data.ndim == 3 and data.shape[2] in (3, 4):

@@ -116,8 +116,8 @@ def as_image(data: object, source: str = "image") -> NDArray[np.float64]:
         position is named, ``x, y``).
     """
     a = np.asarray(data)
-    if a.dtype == bool:
-        a = a.astype(np.uint8)
+    if a.dtype == bool:  # 0 and 1 (a 1-bit TIFF), not 1/255 as a uint8 would scale it
+        a = a.astype(np.float64)
     if not (np.issubdtype(a.dtype, np.integer) or np.issubdtype(a.dtype, np.floating)):
         raise ImageError(f"{source}: pixels of type {a.dtype} are not grey or colour values")
     if a.ndim == 3 and a.shape[2] in (1, 2, 3, 4):

@@ -3,8 +3,9 @@
 The libraries are optional (the ``vision`` extra) and imported when a file is read:
 
 * **TIFF** through tifffile (every sample type, floats with their NaN, stacks told apart
-  from colour); a TIFF compressed with a codec tifffile needs ``imagecodecs`` for (LZW,
-  JPEG) is read by Pillow instead, which has those codecs built in;
+  from colour), as a viewer shows it (:func:`_as_shown`: a palette looked up, an inverted
+  grey turned over); a TIFF compressed with a codec tifffile needs ``imagecodecs`` for (LZW,
+  JPEG), or in CMYK, YCbCr or CIELab, is read by Pillow instead, which has those built in;
 * **PNG** (and JPEG, BMP, ...) through Pillow, except a 16-bit colour PNG, which Pillow
   would silently cut to 8 bits: that one is read by OpenCV when it is installed, and
   refused with the reason otherwise.
@@ -149,15 +150,58 @@ def _read_tiff(p: Path) -> tuple[NDArray[np.float64], Stated]:
                 if "imagecodecs" in str(e):  # LZW, JPEG, ...: Pillow has them built in
                     return _read_with_pillow(p)[0], stated
                 raise
+            data = _as_shown(p, page, data)
+            if data is None:  # CMYK, YCbCr, CIELab, ...: Pillow turns them into RGB, or says why not
+                return _read_with_pillow(p)[0], stated
     except ImageError:
         raise
     except MemoryError:
         raise ImageError(f"{p}: not a readable TIFF (it asks for more memory than there is)") from None
     except Exception as e:  # noqa: BLE001  - tifffile raises many kinds on a damaged file
         raise ImageError(f"{p}: not a readable TIFF ({_reason(e)})") from None
-    if data.ndim == 3 and data.shape[0] in (3, 4) and data.shape[2] not in (1, 2, 3, 4):
-        data = np.moveaxis(data, 0, -1)  # planar colour (samples first)
     return as_image(data, str(p)), stated
+
+
+_MINISWHITE, _MINISBLACK, _RGB, _PALETTE = 0, 1, 2, 3
+"""TIFF PhotometricInterpretation values: inverted grey, grey, RGB, palette."""
+
+
+def _as_shown(p: Path, page: Any, data: NDArray[Any]) -> NDArray[Any] | None:
+    """A TIFF page's samples as the picture a viewer shows; ``None`` for an interpretation left to Pillow.
+
+    Grey and RGB are the samples; an inverted grey (MinIsWhite: 0 is white) is turned over by the type's
+    largest value; a palette image's indices become their colour map's RGB (16 bits). Read raw, these were
+    another picture (a palette's index / 255, an inverted grey) with nothing said. Samples stored planar
+    (samples first) are put last; a grey page's extra samples (alpha, other channels) are not its grey, nor an
+    RGB page's beyond the third its colour."""
+    photometric = int(page.photometric)
+    spp = int(page.samplesperpixel)
+    if spp > 1 and data.ndim == 3 and int(page.planarconfig) == 2 and data.shape[0] == spp:
+        data = np.moveaxis(data, 0, -1)  # planar (samples first): as a contiguous page's
+    if spp > 1 and data.ndim == 3 and data.shape[-1] == spp:
+        if photometric in (_MINISWHITE, _MINISBLACK, _PALETTE):
+            data = data[..., 0]
+        elif photometric == _RGB:
+            data = data[..., :3]
+    if photometric in (_MINISBLACK, _RGB):
+        return data
+    if photometric == _MINISWHITE:
+        if data.dtype == bool:
+            return ~data
+        if np.issubdtype(data.dtype, np.unsignedinteger):
+            return np.iinfo(data.dtype).max - data
+        raise ImageError(f"{p}: an inverted grey TIFF (MinIsWhite) of {data.dtype} samples has no white level to "
+                         "turn it over by: save it as ordinary grey (BlackIsZero)")
+    if photometric == _PALETTE:
+        cmap = page.colormap
+        if cmap is None or data.ndim != 2 or not np.issubdtype(data.dtype, np.unsignedinteger):
+            raise ImageError(f"{p}: a palette TIFF without a colour map for its {data.dtype} samples")
+        cmap = np.asarray(cmap, dtype=np.uint16).reshape(3, -1)
+        if int(data.max()) >= cmap.shape[1]:
+            raise ImageError(f"{p}: a palette index of {int(data.max())} beyond the {cmap.shape[1]} colours of its "
+                             "colour map (a damaged file)")
+        return np.moveaxis(np.take(cmap, data, axis=1), 0, -1)
+    return None
 
 
 def _read_with_pillow(p: Path) -> tuple[NDArray[np.float64], Stated]:
@@ -291,7 +335,10 @@ def _reason(e: BaseException) -> str:
 
 
 def write_png(path: str | os.PathLike[str], image: NDArray[np.float64]) -> None:
-    """Save a grey image (values in [0, 1]; outside clipped) as a 16-bit PNG, atomically (Pillow)."""
+    """Save a grey image (values in [0, 1]) as a 16-bit PNG, atomically (Pillow).
+
+    :class:`ImageError`, nothing written, for values outside [0, 1] (a float TIFF in counts, a signed image's
+    negatives): clipped, they were a PNG all white or all black with nothing said."""
     try:
         from PIL import Image
     except ImportError:
@@ -301,6 +348,10 @@ def write_png(path: str | os.PathLike[str], image: NDArray[np.float64]) -> None:
     a = np.asarray(image, dtype=float)
     if a.ndim != 2 or not np.all(np.isfinite(a)):
         raise ImageError(f"{path}: only a finite 2-D grey image can be saved")
-    data = np.round(np.clip(a, 0.0, 1.0) * 65535.0).astype(np.uint16)
+    lo, hi = float(a.min()), float(a.max())
+    if lo < 0.0 or hi > 1.0:
+        raise ImageError(f"{path}: the frame's values run from {lo:.5g} to {hi:.5g} (a float or signed image): "
+                         "a 16-bit PNG holds 0 to 1, and clipped they would lose the picture; nothing written")
+    data = np.round(a * 65535.0).astype(np.uint16)
     im = Image.fromarray(data)
     atomic_write(path, lambda f: im.save(f, format="PNG"), mode="wb")

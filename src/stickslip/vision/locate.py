@@ -14,7 +14,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 from .camera import CameraEnded
-from .files import open_frames
+from .files import FileCamera, open_frames
 from .focus import Focus, first_frame_focus
 from .frame import Frame, ImageError
 from .images import Stated
@@ -95,7 +95,8 @@ def locate(
     """The tip in each frame that ``names`` mean (image files, folders, globs, or one video).
 
     Every frame is read and checked before the first is tracked (a first pass that keeps
-    nothing, so a long recording is never held in memory): a corrupt, truncated or
+    nothing, so a long recording is never held in memory; the second reads the files the
+    first named, whatever a folder or glob matches by then): a corrupt, truncated or
     missing file, an empty folder, frames of mixed sizes, a stack or NaN pixels raise
     :class:`~.frame.ImageError` (a video that cannot be opened :class:`~.camera.CameraError`)
     with nothing tracked. ``progress(done, total)`` is called as frames are checked and
@@ -103,6 +104,7 @@ def locate(
     """
     n = 0
     camera = open_frames(names)
+    paths = getattr(camera, "paths", None)  # the files named once: a folder written into meanwhile changes nothing
     turned = stated_pixel = None
     try:
         while True:
@@ -116,9 +118,9 @@ def locate(
         turned, stated_pixel = getattr(camera, "turned", None), getattr(camera, "stated_pixel", None)
     finally:
         camera.close()
-    if n == 0:
-        raise ImageError("the recording has no frames")
-    camera = open_frames(names)
+    if n == 0:  # a video that opens and gives none (files named are never none: frame_paths refuses that)
+        raise ImageError(f"{', '.join(os.fspath(x) for x in names[:3])}: the recording has no frames")
+    camera = open_frames(names) if paths is None else FileCamera(paths)
     try:
         first = camera.grab()
         tracker = TipTracker(first, tip, params)
